@@ -1186,59 +1186,95 @@ ENU_DOPPLER18_BLOCK void horner_last_into_S(enu_doppler18_discretize_scratch *re
 
 ENU_DOPPLER18_BLOCK void horner_unit_columns(enu_doppler18_discretize_scratch *restrict w)
 {
-    lane_pair_store(&w->S[132],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][0],
-            w->term[1][0]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][1], w->term[1][1]),
-            lane_pair_load(&w->fh[15])), lane_pair_of(w->term[1][2], w->term[1][2]),
-            lane_pair_load(&w->fh[26])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&w->S[132], pair);
+    }
     w->S[134] = w->term[1][0]*w->fh[6] + w->term[1][1]*w->fh[17] + w->term[1][2]*w->fh[28];
-    lane_pair_store(&w->S[135],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][14],
-            w->term[1][14]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][15],
-            w->term[1][15]), lane_pair_load(&w->fh[15])), lane_pair_of(w->term[1][16],
-            w->term[1][16]), lane_pair_load(&w->fh[26])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][14], w->term[1][14]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][15], w->term[1][15]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][16], w->term[1][16]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&w->S[135], pair);
+    }
     w->S[137] = w->term[1][14]*w->fh[6] + w->term[1][15]*w->fh[17] + w->term[1][16]*w->fh[28];
-    lane_pair_store(&w->S[138],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][28],
-            w->term[1][28]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][29],
-            w->term[1][29]), lane_pair_load(&w->fh[15])), lane_pair_of(w->term[1][30],
-            w->term[1][30]), lane_pair_load(&w->fh[26])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][28], w->term[1][28]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][29], w->term[1][29]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][30], w->term[1][30]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&w->S[138], pair);
+    }
     w->S[140] = w->term[1][28]*w->fh[6] + w->term[1][29]*w->fh[17] + w->term[1][30]*w->fh[28];
-    lane_pair_store(&w->S[141],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][42],
-            w->term[1][42]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][43],
-            w->term[1][43]), lane_pair_load(&w->fh[15])), lane_pair_of(w->term[1][44],
-            w->term[1][44]), lane_pair_load(&w->fh[26])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][42], w->term[1][42]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][43], w->term[1][43]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][44], w->term[1][44]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&w->S[141], pair);
+    }
     w->S[143] = w->term[1][42]*w->fh[6] + w->term[1][43]*w->fh[17] + w->term[1][44]*w->fh[28];
-    lane_pair_store(&w->S[144],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][56],
-            w->term[1][56]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][57],
-            w->term[1][57]), lane_pair_load(&w->fh[15])), lane_pair_of(w->term[1][58],
-            w->term[1][58]), lane_pair_load(&w->fh[26])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][56], w->term[1][56]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][57], w->term[1][57]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][58], w->term[1][58]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&w->S[144], pair);
+    }
     w->S[146] = w->term[1][56]*w->fh[6] + w->term[1][57]*w->fh[17] + w->term[1][58]*w->fh[28];
-    lane_pair_store(&w->S[147],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][70],
-            w->term[1][70]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][71],
-            w->term[1][71]), lane_pair_load(&w->fh[15])), lane_pair_of(w->term[1][72],
-            w->term[1][72]), lane_pair_load(&w->fh[26])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][70], w->term[1][70]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][71], w->term[1][71]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][72], w->term[1][72]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&w->S[147], pair);
+    }
     w->S[149] = w->term[1][70]*w->fh[6] + w->term[1][71]*w->fh[17] + w->term[1][72]*w->fh[28];
-    lane_pair_store(&w->S[150],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][84],
-            w->term[1][84]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][85],
-            w->term[1][85]), lane_pair_load(&w->fh[15])), lane_pair_of(w->term[1][86],
-            w->term[1][86]), lane_pair_load(&w->fh[26])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][84], w->term[1][84]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][85], w->term[1][85]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][86], w->term[1][86]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&w->S[150], pair);
+    }
     w->S[152] = w->term[1][84]*w->fh[6] + w->term[1][85]*w->fh[17] + w->term[1][86]*w->fh[28];
-    lane_pair_store(&w->S[154],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][98],
-            w->term[1][98]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][99],
-            w->term[1][99]), lane_pair_load(&w->fh[15])), lane_pair_of(w->term[1][100],
-            w->term[1][100]), lane_pair_load(&w->fh[26])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][98], w->term[1][98]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][99], w->term[1][99]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][100], w->term[1][100]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&w->S[154], pair);
+    }
     w->S[156] = w->term[1][98]*w->fh[6] + w->term[1][99]*w->fh[17] + w->term[1][100]*w->fh[28];
-    lane_pair_store(&w->S[157],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][112],
-            w->term[1][112]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][113],
-            w->term[1][113]), lane_pair_load(&w->fh[15])), lane_pair_of(w->term[1][114],
-            w->term[1][114]), lane_pair_load(&w->fh[26])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][112], w->term[1][112]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][113], w->term[1][113]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][114], w->term[1][114]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&w->S[157], pair);
+    }
     w->S[159] = w->term[1][112]*w->fh[6] + w->term[1][113]*w->fh[17] + w->term[1][114]*w->fh[28];
 }
 
@@ -1376,59 +1412,95 @@ ENU_DOPPLER18_BLOCK void horner_transition(enu_doppler18_transition *restrict t,
     t->Phi[160] = w->fh[70]*w->S[129];
     t->Phi[161] = w->fh[71]*w->S[130];
     t->Phi[162] = w->fh[72]*w->S[131];
-    lane_pair_store(&t->Phi[8],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[0],
-            w->S[0]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[1], w->S[1]),
-            lane_pair_load(&w->fh[15])), lane_pair_of(w->S[2], w->S[2]),
-            lane_pair_load(&w->fh[26])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&t->Phi[8], pair);
+    }
     t->Phi[10] = w->S[0]*w->fh[6] + w->S[1]*w->fh[17] + w->S[2]*w->fh[28];
-    lane_pair_store(&t->Phi[25],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[14],
-            w->S[14]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[15], w->S[15]),
-            lane_pair_load(&w->fh[15])), lane_pair_of(w->S[16], w->S[16]),
-            lane_pair_load(&w->fh[26])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[14], w->S[14]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[15], w->S[15]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[16], w->S[16]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&t->Phi[25], pair);
+    }
     t->Phi[27] = w->S[14]*w->fh[6] + w->S[15]*w->fh[17] + w->S[16]*w->fh[28];
-    lane_pair_store(&t->Phi[42],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[28],
-            w->S[28]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[29], w->S[29]),
-            lane_pair_load(&w->fh[15])), lane_pair_of(w->S[30], w->S[30]),
-            lane_pair_load(&w->fh[26])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[28], w->S[28]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[29], w->S[29]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[30], w->S[30]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&t->Phi[42], pair);
+    }
     t->Phi[44] = w->S[28]*w->fh[6] + w->S[29]*w->fh[17] + w->S[30]*w->fh[28];
-    lane_pair_store(&t->Phi[59],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[42],
-            w->S[42]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[43], w->S[43]),
-            lane_pair_load(&w->fh[15])), lane_pair_of(w->S[44], w->S[44]),
-            lane_pair_load(&w->fh[26])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[42], w->S[42]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[43], w->S[43]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[44], w->S[44]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&t->Phi[59], pair);
+    }
     t->Phi[61] = w->S[42]*w->fh[6] + w->S[43]*w->fh[17] + w->S[44]*w->fh[28];
-    lane_pair_store(&t->Phi[76],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[56],
-            w->S[56]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[57], w->S[57]),
-            lane_pair_load(&w->fh[15])), lane_pair_of(w->S[58], w->S[58]),
-            lane_pair_load(&w->fh[26])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[56], w->S[56]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[57], w->S[57]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[58], w->S[58]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&t->Phi[76], pair);
+    }
     t->Phi[78] = w->S[56]*w->fh[6] + w->S[57]*w->fh[17] + w->S[58]*w->fh[28];
-    lane_pair_store(&t->Phi[93],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[70],
-            w->S[70]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[71], w->S[71]),
-            lane_pair_load(&w->fh[15])), lane_pair_of(w->S[72], w->S[72]),
-            lane_pair_load(&w->fh[26])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[70], w->S[70]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[71], w->S[71]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[72], w->S[72]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&t->Phi[93], pair);
+    }
     t->Phi[95] = w->S[70]*w->fh[6] + w->S[71]*w->fh[17] + w->S[72]*w->fh[28];
-    lane_pair_store(&t->Phi[110],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[84],
-            w->S[84]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[85], w->S[85]),
-            lane_pair_load(&w->fh[15])), lane_pair_of(w->S[86], w->S[86]),
-            lane_pair_load(&w->fh[26])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[84], w->S[84]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[85], w->S[85]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[86], w->S[86]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&t->Phi[110], pair);
+    }
     t->Phi[112] = w->S[84]*w->fh[6] + w->S[85]*w->fh[17] + w->S[86]*w->fh[28];
-    lane_pair_store(&t->Phi[128],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[98],
-            w->S[98]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[99], w->S[99]),
-            lane_pair_load(&w->fh[15])), lane_pair_of(w->S[100], w->S[100]),
-            lane_pair_load(&w->fh[26])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[98], w->S[98]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[99], w->S[99]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[100], w->S[100]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&t->Phi[128], pair);
+    }
     t->Phi[130] = w->S[98]*w->fh[6] + w->S[99]*w->fh[17] + w->S[100]*w->fh[28];
-    lane_pair_store(&t->Phi[145],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[112],
-            w->S[112]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[113], w->S[113]),
-            lane_pair_load(&w->fh[15])), lane_pair_of(w->S[114], w->S[114]),
-            lane_pair_load(&w->fh[26])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[112], w->S[112]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[113], w->S[113]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[114], w->S[114]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&t->Phi[145], pair);
+    }
     t->Phi[147] = w->S[112]*w->fh[6] + w->S[113]*w->fh[17] + w->S[114]*w->fh[28];
     t->Phi[126] = 0;
     t->Phi[154] = one;
@@ -2244,10 +2316,15 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar transition_check(enu_doppler18_transiti
 ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
         enu_doppler18_discretize_scratch *restrict w)
 {
-    lane_pair_store(&w->term[0][0],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[0],
-            w->S[0]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[1], w->S[1]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[2], w->S[2]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][0], pair);
+    }
     w->term[0][2] = w->S[0]*m->G[2] + w->S[1]*m->G[5] + w->S[2]*m->G[8];
     w->term[0][3] = w->S[8]*m->G[9];
     w->term[0][4] = w->S[9]*m->G[10];
@@ -2255,10 +2332,15 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
     w->term[0][6] = w->S[11]*m->G[12];
     w->term[0][7] = w->S[12]*m->G[13];
     w->term[0][8] = w->S[13]*m->G[14];
-    lane_pair_store(&w->term[0][9],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[14],
-            w->S[14]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[15], w->S[15]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[16], w->S[16]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[14], w->S[14]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[15], w->S[15]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[16], w->S[16]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][9], pair);
+    }
     w->term[0][11] = w->S[14]*m->G[2] + w->S[15]*m->G[5] + w->S[16]*m->G[8];
     w->term[0][12] = w->S[22]*m->G[9];
     w->term[0][13] = w->S[23]*m->G[10];
@@ -2266,10 +2348,15 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
     w->term[0][15] = w->S[25]*m->G[12];
     w->term[0][16] = w->S[26]*m->G[13];
     w->term[0][17] = w->S[27]*m->G[14];
-    lane_pair_store(&w->term[0][18],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[28],
-            w->S[28]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[29], w->S[29]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[30], w->S[30]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[28], w->S[28]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[29], w->S[29]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[30], w->S[30]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][18], pair);
+    }
     w->term[0][20] = w->S[28]*m->G[2] + w->S[29]*m->G[5] + w->S[30]*m->G[8];
     w->term[0][21] = w->S[36]*m->G[9];
     w->term[0][22] = w->S[37]*m->G[10];
@@ -2277,10 +2364,15 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
     w->term[0][24] = w->S[39]*m->G[12];
     w->term[0][25] = w->S[40]*m->G[13];
     w->term[0][26] = w->S[41]*m->G[14];
-    lane_pair_store(&w->term[0][27],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[42],
-            w->S[42]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[43], w->S[43]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[44], w->S[44]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[42], w->S[42]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[43], w->S[43]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[44], w->S[44]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][27], pair);
+    }
     w->term[0][29] = w->S[42]*m->G[2] + w->S[43]*m->G[5] + w->S[44]*m->G[8];
     w->term[0][30] = w->S[50]*m->G[9];
     w->term[0][31] = w->S[51]*m->G[10];
@@ -2288,10 +2380,15 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
     w->term[0][33] = w->S[53]*m->G[12];
     w->term[0][34] = w->S[54]*m->G[13];
     w->term[0][35] = w->S[55]*m->G[14];
-    lane_pair_store(&w->term[0][36],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[56],
-            w->S[56]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[57], w->S[57]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[58], w->S[58]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[56], w->S[56]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[57], w->S[57]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[58], w->S[58]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][36], pair);
+    }
     w->term[0][38] = w->S[56]*m->G[2] + w->S[57]*m->G[5] + w->S[58]*m->G[8];
     w->term[0][39] = w->S[64]*m->G[9];
     w->term[0][40] = w->S[65]*m->G[10];
@@ -2299,10 +2396,15 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
     w->term[0][42] = w->S[67]*m->G[12];
     w->term[0][43] = w->S[68]*m->G[13];
     w->term[0][44] = w->S[69]*m->G[14];
-    lane_pair_store(&w->term[0][45],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[70],
-            w->S[70]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[71], w->S[71]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[72], w->S[72]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[70], w->S[70]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[71], w->S[71]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[72], w->S[72]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][45], pair);
+    }
     w->term[0][47] = w->S[70]*m->G[2] + w->S[71]*m->G[5] + w->S[72]*m->G[8];
     w->term[0][48] = w->S[78]*m->G[9];
     w->term[0][49] = w->S[79]*m->G[10];
@@ -2310,10 +2412,15 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
     w->term[0][51] = w->S[81]*m->G[12];
     w->term[0][52] = w->S[82]*m->G[13];
     w->term[0][53] = w->S[83]*m->G[14];
-    lane_pair_store(&w->term[0][54],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[84],
-            w->S[84]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[85], w->S[85]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[86], w->S[86]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[84], w->S[84]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[85], w->S[85]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[86], w->S[86]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][54], pair);
+    }
     w->term[0][56] = w->S[84]*m->G[2] + w->S[85]*m->G[5] + w->S[86]*m->G[8];
     w->term[0][57] = w->S[92]*m->G[9];
     w->term[0][58] = w->S[93]*m->G[10];
@@ -2321,11 +2428,15 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
     w->term[0][60] = w->S[95]*m->G[12];
     w->term[0][61] = w->S[96]*m->G[13];
     w->term[0][62] = w->S[97]*m->G[14];
-    lane_pair_store(&w->term[0][63],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[98],
-            w->S[98]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[99], w->S[99]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[100], w->S[100]),
-            lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[98], w->S[98]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[99], w->S[99]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[100], w->S[100]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][63], pair);
+    }
     w->term[0][65] = w->S[98]*m->G[2] + w->S[99]*m->G[5] + w->S[100]*m->G[8];
     w->term[0][66] = w->S[106]*m->G[9];
     w->term[0][67] = w->S[107]*m->G[10];
@@ -2333,11 +2444,15 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
     w->term[0][69] = w->S[109]*m->G[12];
     w->term[0][70] = w->S[110]*m->G[13];
     w->term[0][71] = w->S[111]*m->G[14];
-    lane_pair_store(&w->term[0][72],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[112],
-            w->S[112]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[113], w->S[113]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[114], w->S[114]),
-            lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[112], w->S[112]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[113], w->S[113]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[114], w->S[114]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][72], pair);
+    }
     w->term[0][74] = w->S[112]*m->G[2] + w->S[113]*m->G[5] + w->S[114]*m->G[8];
     w->term[0][75] = w->S[120]*m->G[9];
     w->term[0][76] = w->S[121]*m->G[10];
@@ -2357,14 +2472,22 @@ ENU_DOPPLER18_BLOCK void process_noise(const enu_doppler18_matrices *restrict m,
         enu_doppler18_transition *restrict t, enu_doppler18_discretize_scratch *restrict w, const
         enu_doppler18_scalar T)
 {
-    lane_pair_store(&w->term[1][87], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[0])));
-    lane_pair_store(&w->term[1][89], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[2])));
-    lane_pair_store(&w->term[1][91], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[4])));
-    lane_pair_store(&w->term[1][93], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[0]));
+        lane_pair_store(&w->term[1][87], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[2]));
+        lane_pair_store(&w->term[1][89], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[4]));
+        lane_pair_store(&w->term[1][91], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[6]));
+        lane_pair_store(&w->term[1][93], pair);
+    }
     w->term[1][95] = T*m->q[8];
     w->term[1][0] = w->term[0][0]*w->term[1][87];
     w->term[1][1] = w->term[0][1]*w->term[1][88];

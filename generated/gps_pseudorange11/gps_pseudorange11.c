@@ -1129,14 +1129,22 @@ GPS_PSEUDORANGE11_BLOCK void process_noise(const gps_pseudorange11_matrices *res
         gps_pseudorange11_transition *restrict t, gps_pseudorange11_discretize_scratch *restrict w,
         const gps_pseudorange11_scalar T)
 {
-    lane_pair_store(&w->term[1][48], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[0])));
-    lane_pair_store(&w->term[1][50], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[2])));
-    lane_pair_store(&w->term[1][52], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[4])));
-    lane_pair_store(&w->term[1][54], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[0]));
+        lane_pair_store(&w->term[1][48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[2]));
+        lane_pair_store(&w->term[1][50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[4]));
+        lane_pair_store(&w->term[1][52], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[6]));
+        lane_pair_store(&w->term[1][54], pair);
+    }
     w->term[1][0] = w->term[0][0]*w->term[1][48];
     w->term[1][1] = w->term[0][1]*w->term[1][49];
     w->term[1][2] = w->term[0][2]*w->term[1][50];

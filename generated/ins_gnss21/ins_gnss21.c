@@ -2207,15 +2207,25 @@ INS_GNSS21_BLOCK ins_gnss21_scalar transition_check(ins_gnss21_transition *restr
 INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
         ins_gnss21_discretize_scratch *restrict w)
 {
-    lane_pair_store(&w->term[0][0],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[6],
-            w->S[6]), lane_pair_load(&m->G[9])), lane_pair_of(w->S[7], w->S[7]),
-            lane_pair_load(&m->G[12])), lane_pair_of(w->S[8], w->S[8]), lane_pair_load(&m->G[15])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[6], w->S[6]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[7], w->S[7]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[8], w->S[8]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][0], pair);
+    }
     w->term[0][2] = w->S[6]*m->G[11] + w->S[7]*m->G[14] + w->S[8]*m->G[17];
-    lane_pair_store(&w->term[0][3],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[3],
-            w->S[3]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[4], w->S[4]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[5], w->S[5]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[3], w->S[3]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[4], w->S[4]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[5], w->S[5]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][3], pair);
+    }
     w->term[0][5] = w->S[3]*m->G[2] + w->S[4]*m->G[5] + w->S[5]*m->G[8];
     w->term[0][6] = w->S[9]*m->G[18];
     w->term[0][7] = w->S[10]*m->G[19];
@@ -2229,16 +2239,25 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
     w->term[0][15] = w->S[18]*m->G[27];
     w->term[0][16] = w->S[19]*m->G[28];
     w->term[0][17] = w->S[20]*m->G[29];
-    lane_pair_store(&w->term[0][18],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[28],
-            w->S[28]), lane_pair_load(&m->G[9])), lane_pair_of(w->S[29], w->S[29]),
-            lane_pair_load(&m->G[12])), lane_pair_of(w->S[30], w->S[30]),
-            lane_pair_load(&m->G[15])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[28], w->S[28]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[29], w->S[29]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[30], w->S[30]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][18], pair);
+    }
     w->term[0][20] = w->S[28]*m->G[11] + w->S[29]*m->G[14] + w->S[30]*m->G[17];
-    lane_pair_store(&w->term[0][21],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[25],
-            w->S[25]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[26], w->S[26]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[27], w->S[27]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[27], w->S[27]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][21], pair);
+    }
     w->term[0][23] = w->S[25]*m->G[2] + w->S[26]*m->G[5] + w->S[27]*m->G[8];
     w->term[0][24] = w->S[31]*m->G[18];
     w->term[0][25] = w->S[32]*m->G[19];
@@ -2252,16 +2271,25 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
     w->term[0][33] = w->S[40]*m->G[27];
     w->term[0][34] = w->S[41]*m->G[28];
     w->term[0][35] = w->S[42]*m->G[29];
-    lane_pair_store(&w->term[0][36],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[50],
-            w->S[50]), lane_pair_load(&m->G[9])), lane_pair_of(w->S[51], w->S[51]),
-            lane_pair_load(&m->G[12])), lane_pair_of(w->S[52], w->S[52]),
-            lane_pair_load(&m->G[15])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[51], w->S[51]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[52], w->S[52]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][36], pair);
+    }
     w->term[0][38] = w->S[50]*m->G[11] + w->S[51]*m->G[14] + w->S[52]*m->G[17];
-    lane_pair_store(&w->term[0][39],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[47],
-            w->S[47]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[48], w->S[48]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[49], w->S[49]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[47], w->S[47]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][39], pair);
+    }
     w->term[0][41] = w->S[47]*m->G[2] + w->S[48]*m->G[5] + w->S[49]*m->G[8];
     w->term[0][42] = w->S[53]*m->G[18];
     w->term[0][43] = w->S[54]*m->G[19];
@@ -2275,16 +2303,25 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
     w->term[0][51] = w->S[62]*m->G[27];
     w->term[0][52] = w->S[63]*m->G[28];
     w->term[0][53] = w->S[64]*m->G[29];
-    lane_pair_store(&w->term[0][54],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[72],
-            w->S[72]), lane_pair_load(&m->G[9])), lane_pair_of(w->S[73], w->S[73]),
-            lane_pair_load(&m->G[12])), lane_pair_of(w->S[74], w->S[74]),
-            lane_pair_load(&m->G[15])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][54], pair);
+    }
     w->term[0][56] = w->S[72]*m->G[11] + w->S[73]*m->G[14] + w->S[74]*m->G[17];
-    lane_pair_store(&w->term[0][57],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[69],
-            w->S[69]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[70], w->S[70]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[71], w->S[71]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[69], w->S[69]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[70], w->S[70]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[71], w->S[71]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][57], pair);
+    }
     w->term[0][59] = w->S[69]*m->G[2] + w->S[70]*m->G[5] + w->S[71]*m->G[8];
     w->term[0][60] = w->S[75]*m->G[18];
     w->term[0][61] = w->S[76]*m->G[19];
@@ -2298,16 +2335,25 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
     w->term[0][69] = w->S[84]*m->G[27];
     w->term[0][70] = w->S[85]*m->G[28];
     w->term[0][71] = w->S[86]*m->G[29];
-    lane_pair_store(&w->term[0][72],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[94],
-            w->S[94]), lane_pair_load(&m->G[9])), lane_pair_of(w->S[95], w->S[95]),
-            lane_pair_load(&m->G[12])), lane_pair_of(w->S[96], w->S[96]),
-            lane_pair_load(&m->G[15])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[94], w->S[94]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[95], w->S[95]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[96], w->S[96]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][72], pair);
+    }
     w->term[0][74] = w->S[94]*m->G[11] + w->S[95]*m->G[14] + w->S[96]*m->G[17];
-    lane_pair_store(&w->term[0][75],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[91],
-            w->S[91]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[92], w->S[92]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[93], w->S[93]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[91], w->S[91]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[92], w->S[92]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[93], w->S[93]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][75], pair);
+    }
     w->term[0][77] = w->S[91]*m->G[2] + w->S[92]*m->G[5] + w->S[93]*m->G[8];
     w->term[0][78] = w->S[97]*m->G[18];
     w->term[0][79] = w->S[98]*m->G[19];
@@ -2321,17 +2367,25 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
     w->term[0][87] = w->S[106]*m->G[27];
     w->term[0][88] = w->S[107]*m->G[28];
     w->term[0][89] = w->S[108]*m->G[29];
-    lane_pair_store(&w->term[0][90],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[116],
-            w->S[116]), lane_pair_load(&m->G[9])), lane_pair_of(w->S[117], w->S[117]),
-            lane_pair_load(&m->G[12])), lane_pair_of(w->S[118], w->S[118]),
-            lane_pair_load(&m->G[15])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[116], w->S[116]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[117], w->S[117]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[118], w->S[118]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][90], pair);
+    }
     w->term[0][92] = w->S[116]*m->G[11] + w->S[117]*m->G[14] + w->S[118]*m->G[17];
-    lane_pair_store(&w->term[0][93],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[113],
-            w->S[113]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[114], w->S[114]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[115], w->S[115]),
-            lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[113], w->S[113]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[114], w->S[114]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[115], w->S[115]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][93], pair);
+    }
     w->term[0][95] = w->S[113]*m->G[2] + w->S[114]*m->G[5] + w->S[115]*m->G[8];
     w->term[0][96] = w->S[119]*m->G[18];
     w->term[0][97] = w->S[120]*m->G[19];
@@ -2345,17 +2399,25 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
     w->term[0][105] = w->S[128]*m->G[27];
     w->term[0][106] = w->S[129]*m->G[28];
     w->term[0][107] = w->S[130]*m->G[29];
-    lane_pair_store(&w->term[0][108],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[138],
-            w->S[138]), lane_pair_load(&m->G[9])), lane_pair_of(w->S[139], w->S[139]),
-            lane_pair_load(&m->G[12])), lane_pair_of(w->S[140], w->S[140]),
-            lane_pair_load(&m->G[15])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[138], w->S[138]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[139], w->S[139]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[140], w->S[140]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][108], pair);
+    }
     w->term[0][110] = w->S[138]*m->G[11] + w->S[139]*m->G[14] + w->S[140]*m->G[17];
-    lane_pair_store(&w->term[0][111],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[135],
-            w->S[135]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[136], w->S[136]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[137], w->S[137]),
-            lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[135], w->S[135]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[136], w->S[136]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[137], w->S[137]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][111], pair);
+    }
     w->term[0][113] = w->S[135]*m->G[2] + w->S[136]*m->G[5] + w->S[137]*m->G[8];
     w->term[0][114] = w->S[141]*m->G[18];
     w->term[0][115] = w->S[142]*m->G[19];
@@ -2369,17 +2431,25 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
     w->term[0][123] = w->S[150]*m->G[27];
     w->term[0][124] = w->S[151]*m->G[28];
     w->term[0][125] = w->S[152]*m->G[29];
-    lane_pair_store(&w->term[0][126],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[160],
-            w->S[160]), lane_pair_load(&m->G[9])), lane_pair_of(w->S[161], w->S[161]),
-            lane_pair_load(&m->G[12])), lane_pair_of(w->S[162], w->S[162]),
-            lane_pair_load(&m->G[15])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[160], w->S[160]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[161], w->S[161]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[162], w->S[162]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][126], pair);
+    }
     w->term[0][128] = w->S[160]*m->G[11] + w->S[161]*m->G[14] + w->S[162]*m->G[17];
-    lane_pair_store(&w->term[0][129],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[157],
-            w->S[157]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[158], w->S[158]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[159], w->S[159]),
-            lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[157], w->S[157]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[158], w->S[158]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[159], w->S[159]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][129], pair);
+    }
     w->term[0][131] = w->S[157]*m->G[2] + w->S[158]*m->G[5] + w->S[159]*m->G[8];
     w->term[0][132] = w->S[163]*m->G[18];
     w->term[0][133] = w->S[164]*m->G[19];
@@ -2393,17 +2463,25 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
     w->term[0][141] = w->S[172]*m->G[27];
     w->term[0][142] = w->S[173]*m->G[28];
     w->term[0][143] = w->S[174]*m->G[29];
-    lane_pair_store(&w->term[0][144],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[182],
-            w->S[182]), lane_pair_load(&m->G[9])), lane_pair_of(w->S[183], w->S[183]),
-            lane_pair_load(&m->G[12])), lane_pair_of(w->S[184], w->S[184]),
-            lane_pair_load(&m->G[15])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[182], w->S[182]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[183], w->S[183]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[184], w->S[184]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][144], pair);
+    }
     w->term[0][146] = w->S[182]*m->G[11] + w->S[183]*m->G[14] + w->S[184]*m->G[17];
-    lane_pair_store(&w->term[0][147],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[179],
-            w->S[179]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[180], w->S[180]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[181], w->S[181]),
-            lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[179], w->S[179]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[180], w->S[180]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[181], w->S[181]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][147], pair);
+    }
     w->term[0][149] = w->S[179]*m->G[2] + w->S[180]*m->G[5] + w->S[181]*m->G[8];
     w->term[0][150] = w->S[185]*m->G[18];
     w->term[0][151] = w->S[186]*m->G[19];
@@ -2434,24 +2512,42 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
 INS_GNSS21_BLOCK void process_noise(const ins_gnss21_matrices *restrict m, ins_gnss21_transition
         *restrict t, ins_gnss21_discretize_scratch *restrict w, const ins_gnss21_scalar T)
 {
-    lane_pair_store(&w->term[1][174], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[0])));
-    lane_pair_store(&w->term[1][176], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[2])));
-    lane_pair_store(&w->term[1][178], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[4])));
-    lane_pair_store(&w->term[1][180], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[6])));
-    lane_pair_store(&w->term[1][182], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[8])));
-    lane_pair_store(&w->term[1][184], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[10])));
-    lane_pair_store(&w->term[1][186], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[12])));
-    lane_pair_store(&w->term[1][188], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[14])));
-    lane_pair_store(&w->term[1][190], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[16])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[0]));
+        lane_pair_store(&w->term[1][174], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[2]));
+        lane_pair_store(&w->term[1][176], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[4]));
+        lane_pair_store(&w->term[1][178], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[6]));
+        lane_pair_store(&w->term[1][180], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[8]));
+        lane_pair_store(&w->term[1][182], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[10]));
+        lane_pair_store(&w->term[1][184], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[12]));
+        lane_pair_store(&w->term[1][186], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[14]));
+        lane_pair_store(&w->term[1][188], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[16]));
+        lane_pair_store(&w->term[1][190], pair);
+    }
     w->term[1][0] = w->term[0][0]*w->term[1][174];
     w->term[1][1] = w->term[0][1]*w->term[1][175];
     w->term[1][2] = w->term[0][2]*w->term[1][176];

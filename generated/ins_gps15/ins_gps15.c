@@ -962,113 +962,185 @@ INS_GPS15_BLOCK void horner_last_into_S(ins_gps15_discretize_scratch *restrict w
 
 INS_GPS15_BLOCK void horner_unit_columns(ins_gps15_discretize_scratch *restrict w)
 {
-    lane_pair_store(&w->S[72],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][0],
-            w->term[1][0]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][1], w->term[1][1]),
-            lane_pair_load(&w->fh[12])), lane_pair_of(w->term[1][2], w->term[1][2]),
-            lane_pair_load(&w->fh[20])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&w->S[72], pair);
+    }
     w->S[74] = w->term[1][0]*w->fh[6] + w->term[1][1]*w->fh[14] + w->term[1][2]*w->fh[22];
-    lane_pair_store(&w->S[75],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][3],
-            w->term[1][3]), lane_pair_load(&w->fh[30])), lane_pair_of(w->term[1][4], w->term[1][4]),
-            lane_pair_load(&w->fh[40])), lane_pair_of(w->term[1][5], w->term[1][5]),
-            lane_pair_load(&w->fh[49])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][3], w->term[1][3]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][4], w->term[1][4]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][5], w->term[1][5]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[75], pair);
+    }
     w->S[77] = w->term[1][3]*w->fh[32] + w->term[1][4]*w->fh[42] + w->term[1][5]*w->fh[51];
-    lane_pair_store(&w->S[78],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][8],
-            w->term[1][8]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][9], w->term[1][9]),
-            lane_pair_load(&w->fh[12])), lane_pair_of(w->term[1][10], w->term[1][10]),
-            lane_pair_load(&w->fh[20])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][8], w->term[1][8]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][9], w->term[1][9]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][10], w->term[1][10]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&w->S[78], pair);
+    }
     w->S[80] = w->term[1][8]*w->fh[6] + w->term[1][9]*w->fh[14] + w->term[1][10]*w->fh[22];
-    lane_pair_store(&w->S[81],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][11],
-            w->term[1][11]), lane_pair_load(&w->fh[30])), lane_pair_of(w->term[1][12],
-            w->term[1][12]), lane_pair_load(&w->fh[40])), lane_pair_of(w->term[1][13],
-            w->term[1][13]), lane_pair_load(&w->fh[49])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][11], w->term[1][11]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][12], w->term[1][12]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[81], pair);
+    }
     w->S[83] = w->term[1][11]*w->fh[32] + w->term[1][12]*w->fh[42] + w->term[1][13]*w->fh[51];
-    lane_pair_store(&w->S[84],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][16],
-            w->term[1][16]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][17],
-            w->term[1][17]), lane_pair_load(&w->fh[12])), lane_pair_of(w->term[1][18],
-            w->term[1][18]), lane_pair_load(&w->fh[20])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][16], w->term[1][16]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][17], w->term[1][17]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][18], w->term[1][18]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&w->S[84], pair);
+    }
     w->S[86] = w->term[1][16]*w->fh[6] + w->term[1][17]*w->fh[14] + w->term[1][18]*w->fh[22];
-    lane_pair_store(&w->S[87],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][19],
-            w->term[1][19]), lane_pair_load(&w->fh[30])), lane_pair_of(w->term[1][20],
-            w->term[1][20]), lane_pair_load(&w->fh[40])), lane_pair_of(w->term[1][21],
-            w->term[1][21]), lane_pair_load(&w->fh[49])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][19], w->term[1][19]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][20], w->term[1][20]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][21], w->term[1][21]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[87], pair);
+    }
     w->S[89] = w->term[1][19]*w->fh[32] + w->term[1][20]*w->fh[42] + w->term[1][21]*w->fh[51];
-    lane_pair_store(&w->S[90],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][24],
-            w->term[1][24]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][25],
-            w->term[1][25]), lane_pair_load(&w->fh[12])), lane_pair_of(w->term[1][26],
-            w->term[1][26]), lane_pair_load(&w->fh[20])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&w->S[90], pair);
+    }
     w->S[92] = w->term[1][24]*w->fh[6] + w->term[1][25]*w->fh[14] + w->term[1][26]*w->fh[22];
-    lane_pair_store(&w->S[93],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][27],
-            w->term[1][27]), lane_pair_load(&w->fh[30])), lane_pair_of(w->term[1][28],
-            w->term[1][28]), lane_pair_load(&w->fh[40])), lane_pair_of(w->term[1][29],
-            w->term[1][29]), lane_pair_load(&w->fh[49])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][27], w->term[1][27]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][28], w->term[1][28]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][29], w->term[1][29]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[93], pair);
+    }
     w->S[95] = w->term[1][27]*w->fh[32] + w->term[1][28]*w->fh[42] + w->term[1][29]*w->fh[51];
-    lane_pair_store(&w->S[96],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][32],
-            w->term[1][32]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][33],
-            w->term[1][33]), lane_pair_load(&w->fh[12])), lane_pair_of(w->term[1][34],
-            w->term[1][34]), lane_pair_load(&w->fh[20])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][32], w->term[1][32]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][33], w->term[1][33]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][34], w->term[1][34]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&w->S[96], pair);
+    }
     w->S[98] = w->term[1][32]*w->fh[6] + w->term[1][33]*w->fh[14] + w->term[1][34]*w->fh[22];
-    lane_pair_store(&w->S[99],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][35],
-            w->term[1][35]), lane_pair_load(&w->fh[30])), lane_pair_of(w->term[1][36],
-            w->term[1][36]), lane_pair_load(&w->fh[40])), lane_pair_of(w->term[1][37],
-            w->term[1][37]), lane_pair_load(&w->fh[49])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][35], w->term[1][35]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][36], w->term[1][36]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[99], pair);
+    }
     w->S[101] = w->term[1][35]*w->fh[32] + w->term[1][36]*w->fh[42] + w->term[1][37]*w->fh[51];
-    lane_pair_store(&w->S[102],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][40],
-            w->term[1][40]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][41],
-            w->term[1][41]), lane_pair_load(&w->fh[12])), lane_pair_of(w->term[1][42],
-            w->term[1][42]), lane_pair_load(&w->fh[20])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][40], w->term[1][40]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][41], w->term[1][41]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][42], w->term[1][42]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&w->S[102], pair);
+    }
     w->S[104] = w->term[1][40]*w->fh[6] + w->term[1][41]*w->fh[14] + w->term[1][42]*w->fh[22];
-    lane_pair_store(&w->S[105],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][43],
-            w->term[1][43]), lane_pair_load(&w->fh[30])), lane_pair_of(w->term[1][44],
-            w->term[1][44]), lane_pair_load(&w->fh[40])), lane_pair_of(w->term[1][45],
-            w->term[1][45]), lane_pair_load(&w->fh[49])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][43], w->term[1][43]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][44], w->term[1][44]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][45], w->term[1][45]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[105], pair);
+    }
     w->S[107] = w->term[1][43]*w->fh[32] + w->term[1][44]*w->fh[42] + w->term[1][45]*w->fh[51];
-    lane_pair_store(&w->S[108],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][48],
-            w->term[1][48]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][49],
-            w->term[1][49]), lane_pair_load(&w->fh[12])), lane_pair_of(w->term[1][50],
-            w->term[1][50]), lane_pair_load(&w->fh[20])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&w->S[108], pair);
+    }
     w->S[110] = w->term[1][48]*w->fh[6] + w->term[1][49]*w->fh[14] + w->term[1][50]*w->fh[22];
-    lane_pair_store(&w->S[111],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][51],
-            w->term[1][51]), lane_pair_load(&w->fh[30])), lane_pair_of(w->term[1][52],
-            w->term[1][52]), lane_pair_load(&w->fh[40])), lane_pair_of(w->term[1][53],
-            w->term[1][53]), lane_pair_load(&w->fh[49])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][51], w->term[1][51]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][52], w->term[1][52]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][53], w->term[1][53]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[111], pair);
+    }
     w->S[113] = w->term[1][51]*w->fh[32] + w->term[1][52]*w->fh[42] + w->term[1][53]*w->fh[51];
-    lane_pair_store(&w->S[115],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][56],
-            w->term[1][56]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][57],
-            w->term[1][57]), lane_pair_load(&w->fh[12])), lane_pair_of(w->term[1][58],
-            w->term[1][58]), lane_pair_load(&w->fh[20])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][56], w->term[1][56]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][57], w->term[1][57]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][58], w->term[1][58]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&w->S[115], pair);
+    }
     w->S[117] = w->term[1][56]*w->fh[6] + w->term[1][57]*w->fh[14] + w->term[1][58]*w->fh[22];
-    lane_pair_store(&w->S[118],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][59],
-            w->term[1][59]), lane_pair_load(&w->fh[30])), lane_pair_of(w->term[1][60],
-            w->term[1][60]), lane_pair_load(&w->fh[40])), lane_pair_of(w->term[1][61],
-            w->term[1][61]), lane_pair_load(&w->fh[49])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][59], w->term[1][59]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][60], w->term[1][60]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[118], pair);
+    }
     w->S[120] = w->term[1][59]*w->fh[32] + w->term[1][60]*w->fh[42] + w->term[1][61]*w->fh[51];
-    lane_pair_store(&w->S[121],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][64],
-            w->term[1][64]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][65],
-            w->term[1][65]), lane_pair_load(&w->fh[12])), lane_pair_of(w->term[1][66],
-            w->term[1][66]), lane_pair_load(&w->fh[20])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][64], w->term[1][64]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][65], w->term[1][65]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][66], w->term[1][66]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&w->S[121], pair);
+    }
     w->S[123] = w->term[1][64]*w->fh[6] + w->term[1][65]*w->fh[14] + w->term[1][66]*w->fh[22];
-    lane_pair_store(&w->S[124],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][67],
-            w->term[1][67]), lane_pair_load(&w->fh[30])), lane_pair_of(w->term[1][68],
-            w->term[1][68]), lane_pair_load(&w->fh[40])), lane_pair_of(w->term[1][69],
-            w->term[1][69]), lane_pair_load(&w->fh[49])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][67], w->term[1][67]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][68], w->term[1][68]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][69], w->term[1][69]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[124], pair);
+    }
     w->S[126] = w->term[1][67]*w->fh[32] + w->term[1][68]*w->fh[42] + w->term[1][69]*w->fh[51];
 }
 
@@ -1147,113 +1219,185 @@ INS_GPS15_BLOCK void horner_transition(ins_gps15_transition *restrict t, const
     for (k = 0; k < 1; ++k) {
         t->Phi[120+k] = w->fh[57]*w->S[47+k];
     }
-    lane_pair_store(&t->Phi[8],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[0],
-            w->S[0]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[1], w->S[1]),
-            lane_pair_load(&w->fh[12])), lane_pair_of(w->S[2], w->S[2]),
-            lane_pair_load(&w->fh[20])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&t->Phi[8], pair);
+    }
     t->Phi[10] = w->S[0]*w->fh[6] + w->S[1]*w->fh[14] + w->S[2]*w->fh[22];
-    lane_pair_store(&t->Phi[11],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[3],
-            w->S[3]), lane_pair_load(&w->fh[30])), lane_pair_of(w->S[4], w->S[4]),
-            lane_pair_load(&w->fh[40])), lane_pair_of(w->S[5], w->S[5]),
-            lane_pair_load(&w->fh[49])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[3], w->S[3]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[4], w->S[4]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[5], w->S[5]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[11], pair);
+    }
     t->Phi[13] = w->S[3]*w->fh[32] + w->S[4]*w->fh[42] + w->S[5]*w->fh[51];
-    lane_pair_store(&t->Phi[22],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[8],
-            w->S[8]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[9], w->S[9]),
-            lane_pair_load(&w->fh[12])), lane_pair_of(w->S[10], w->S[10]),
-            lane_pair_load(&w->fh[20])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[8], w->S[8]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[9], w->S[9]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[10], w->S[10]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&t->Phi[22], pair);
+    }
     t->Phi[24] = w->S[8]*w->fh[6] + w->S[9]*w->fh[14] + w->S[10]*w->fh[22];
-    lane_pair_store(&t->Phi[25],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[11],
-            w->S[11]), lane_pair_load(&w->fh[30])), lane_pair_of(w->S[12], w->S[12]),
-            lane_pair_load(&w->fh[40])), lane_pair_of(w->S[13], w->S[13]),
-            lane_pair_load(&w->fh[49])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[11], w->S[11]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[12], w->S[12]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[25], pair);
+    }
     t->Phi[27] = w->S[11]*w->fh[32] + w->S[12]*w->fh[42] + w->S[13]*w->fh[51];
-    lane_pair_store(&t->Phi[36],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[16],
-            w->S[16]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[17], w->S[17]),
-            lane_pair_load(&w->fh[12])), lane_pair_of(w->S[18], w->S[18]),
-            lane_pair_load(&w->fh[20])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[16], w->S[16]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[17], w->S[17]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[18], w->S[18]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&t->Phi[36], pair);
+    }
     t->Phi[38] = w->S[16]*w->fh[6] + w->S[17]*w->fh[14] + w->S[18]*w->fh[22];
-    lane_pair_store(&t->Phi[39],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[19],
-            w->S[19]), lane_pair_load(&w->fh[30])), lane_pair_of(w->S[20], w->S[20]),
-            lane_pair_load(&w->fh[40])), lane_pair_of(w->S[21], w->S[21]),
-            lane_pair_load(&w->fh[49])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[19], w->S[19]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[20], w->S[20]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[21], w->S[21]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[39], pair);
+    }
     t->Phi[41] = w->S[19]*w->fh[32] + w->S[20]*w->fh[42] + w->S[21]*w->fh[51];
-    lane_pair_store(&t->Phi[50],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[24],
-            w->S[24]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[25], w->S[25]),
-            lane_pair_load(&w->fh[12])), lane_pair_of(w->S[26], w->S[26]),
-            lane_pair_load(&w->fh[20])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&t->Phi[50], pair);
+    }
     t->Phi[52] = w->S[24]*w->fh[6] + w->S[25]*w->fh[14] + w->S[26]*w->fh[22];
-    lane_pair_store(&t->Phi[53],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[27],
-            w->S[27]), lane_pair_load(&w->fh[30])), lane_pair_of(w->S[28], w->S[28]),
-            lane_pair_load(&w->fh[40])), lane_pair_of(w->S[29], w->S[29]),
-            lane_pair_load(&w->fh[49])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[27], w->S[27]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[28], w->S[28]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[29], w->S[29]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[53], pair);
+    }
     t->Phi[55] = w->S[27]*w->fh[32] + w->S[28]*w->fh[42] + w->S[29]*w->fh[51];
-    lane_pair_store(&t->Phi[64],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[32],
-            w->S[32]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[33], w->S[33]),
-            lane_pair_load(&w->fh[12])), lane_pair_of(w->S[34], w->S[34]),
-            lane_pair_load(&w->fh[20])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[32], w->S[32]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[33], w->S[33]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[34], w->S[34]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&t->Phi[64], pair);
+    }
     t->Phi[66] = w->S[32]*w->fh[6] + w->S[33]*w->fh[14] + w->S[34]*w->fh[22];
-    lane_pair_store(&t->Phi[67],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[35],
-            w->S[35]), lane_pair_load(&w->fh[30])), lane_pair_of(w->S[36], w->S[36]),
-            lane_pair_load(&w->fh[40])), lane_pair_of(w->S[37], w->S[37]),
-            lane_pair_load(&w->fh[49])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[35], w->S[35]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[36], w->S[36]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[67], pair);
+    }
     t->Phi[69] = w->S[35]*w->fh[32] + w->S[36]*w->fh[42] + w->S[37]*w->fh[51];
-    lane_pair_store(&t->Phi[78],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[40],
-            w->S[40]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[41], w->S[41]),
-            lane_pair_load(&w->fh[12])), lane_pair_of(w->S[42], w->S[42]),
-            lane_pair_load(&w->fh[20])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[40], w->S[40]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[41], w->S[41]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[42], w->S[42]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&t->Phi[78], pair);
+    }
     t->Phi[80] = w->S[40]*w->fh[6] + w->S[41]*w->fh[14] + w->S[42]*w->fh[22];
-    lane_pair_store(&t->Phi[81],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[43],
-            w->S[43]), lane_pair_load(&w->fh[30])), lane_pair_of(w->S[44], w->S[44]),
-            lane_pair_load(&w->fh[40])), lane_pair_of(w->S[45], w->S[45]),
-            lane_pair_load(&w->fh[49])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[43], w->S[43]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[44], w->S[44]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[45], w->S[45]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[81], pair);
+    }
     t->Phi[83] = w->S[43]*w->fh[32] + w->S[44]*w->fh[42] + w->S[45]*w->fh[51];
-    lane_pair_store(&t->Phi[92],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[48],
-            w->S[48]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[49], w->S[49]),
-            lane_pair_load(&w->fh[12])), lane_pair_of(w->S[50], w->S[50]),
-            lane_pair_load(&w->fh[20])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&t->Phi[92], pair);
+    }
     t->Phi[94] = w->S[48]*w->fh[6] + w->S[49]*w->fh[14] + w->S[50]*w->fh[22];
-    lane_pair_store(&t->Phi[95],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[51],
-            w->S[51]), lane_pair_load(&w->fh[30])), lane_pair_of(w->S[52], w->S[52]),
-            lane_pair_load(&w->fh[40])), lane_pair_of(w->S[53], w->S[53]),
-            lane_pair_load(&w->fh[49])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[51], w->S[51]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[52], w->S[52]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[53], w->S[53]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[95], pair);
+    }
     t->Phi[97] = w->S[51]*w->fh[32] + w->S[52]*w->fh[42] + w->S[53]*w->fh[51];
-    lane_pair_store(&t->Phi[107],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[56],
-            w->S[56]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[57], w->S[57]),
-            lane_pair_load(&w->fh[12])), lane_pair_of(w->S[58], w->S[58]),
-            lane_pair_load(&w->fh[20])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[56], w->S[56]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[57], w->S[57]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[58], w->S[58]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&t->Phi[107], pair);
+    }
     t->Phi[109] = w->S[56]*w->fh[6] + w->S[57]*w->fh[14] + w->S[58]*w->fh[22];
-    lane_pair_store(&t->Phi[110],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[59],
-            w->S[59]), lane_pair_load(&w->fh[30])), lane_pair_of(w->S[60], w->S[60]),
-            lane_pair_load(&w->fh[40])), lane_pair_of(w->S[61], w->S[61]),
-            lane_pair_load(&w->fh[49])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[59], w->S[59]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[60], w->S[60]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[110], pair);
+    }
     t->Phi[112] = w->S[59]*w->fh[32] + w->S[60]*w->fh[42] + w->S[61]*w->fh[51];
-    lane_pair_store(&t->Phi[121],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[64],
-            w->S[64]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[65], w->S[65]),
-            lane_pair_load(&w->fh[12])), lane_pair_of(w->S[66], w->S[66]),
-            lane_pair_load(&w->fh[20])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[64], w->S[64]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[65], w->S[65]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[66], w->S[66]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&t->Phi[121], pair);
+    }
     t->Phi[123] = w->S[64]*w->fh[6] + w->S[65]*w->fh[14] + w->S[66]*w->fh[22];
-    lane_pair_store(&t->Phi[124],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[67],
-            w->S[67]), lane_pair_load(&w->fh[30])), lane_pair_of(w->S[68], w->S[68]),
-            lane_pair_load(&w->fh[40])), lane_pair_of(w->S[69], w->S[69]),
-            lane_pair_load(&w->fh[49])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[67], w->S[67]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[68], w->S[68]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[69], w->S[69]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[124], pair);
+    }
     t->Phi[126] = w->S[67]*w->fh[32] + w->S[68]*w->fh[42] + w->S[69]*w->fh[51];
     t->Phi[105] = 0;
     t->Phi[127] = one;
@@ -1808,115 +1952,203 @@ INS_GPS15_BLOCK ins_gps15_scalar transition_check(ins_gps15_transition *restrict
 INS_GPS15_BLOCK void noise_input(const ins_gps15_matrices *restrict m, ins_gps15_discretize_scratch
         *restrict w)
 {
-    lane_pair_store(&w->term[0][0],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[0],
-            w->S[0]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[1], w->S[1]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[2], w->S[2]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][0], pair);
+    }
     w->term[0][2] = w->S[0]*m->G[2] + w->S[1]*m->G[5] + w->S[2]*m->G[8];
-    lane_pair_store(&w->term[0][3],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[3],
-            w->S[3]), lane_pair_load(&m->G[9])), lane_pair_of(w->S[4], w->S[4]),
-            lane_pair_load(&m->G[12])), lane_pair_of(w->S[5], w->S[5]), lane_pair_load(&m->G[15])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[3], w->S[3]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[4], w->S[4]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[5], w->S[5]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][3], pair);
+    }
     w->term[0][5] = w->S[3]*m->G[11] + w->S[4]*m->G[14] + w->S[5]*m->G[17];
-    lane_pair_store(&w->term[0][6],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[8],
-            w->S[8]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[9], w->S[9]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[10], w->S[10]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[8], w->S[8]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[9], w->S[9]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[10], w->S[10]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][6], pair);
+    }
     w->term[0][8] = w->S[8]*m->G[2] + w->S[9]*m->G[5] + w->S[10]*m->G[8];
-    lane_pair_store(&w->term[0][9],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[11],
-            w->S[11]), lane_pair_load(&m->G[9])), lane_pair_of(w->S[12], w->S[12]),
-            lane_pair_load(&m->G[12])), lane_pair_of(w->S[13], w->S[13]),
-            lane_pair_load(&m->G[15])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[11], w->S[11]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[12], w->S[12]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][9], pair);
+    }
     w->term[0][11] = w->S[11]*m->G[11] + w->S[12]*m->G[14] + w->S[13]*m->G[17];
-    lane_pair_store(&w->term[0][12],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[16],
-            w->S[16]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[17], w->S[17]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[18], w->S[18]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[16], w->S[16]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[17], w->S[17]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[18], w->S[18]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][12], pair);
+    }
     w->term[0][14] = w->S[16]*m->G[2] + w->S[17]*m->G[5] + w->S[18]*m->G[8];
-    lane_pair_store(&w->term[0][15],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[19],
-            w->S[19]), lane_pair_load(&m->G[9])), lane_pair_of(w->S[20], w->S[20]),
-            lane_pair_load(&m->G[12])), lane_pair_of(w->S[21], w->S[21]),
-            lane_pair_load(&m->G[15])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[19], w->S[19]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[20], w->S[20]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[21], w->S[21]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][15], pair);
+    }
     w->term[0][17] = w->S[19]*m->G[11] + w->S[20]*m->G[14] + w->S[21]*m->G[17];
-    lane_pair_store(&w->term[0][18],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[24],
-            w->S[24]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[25], w->S[25]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[26], w->S[26]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][18], pair);
+    }
     w->term[0][20] = w->S[24]*m->G[2] + w->S[25]*m->G[5] + w->S[26]*m->G[8];
-    lane_pair_store(&w->term[0][21],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[27],
-            w->S[27]), lane_pair_load(&m->G[9])), lane_pair_of(w->S[28], w->S[28]),
-            lane_pair_load(&m->G[12])), lane_pair_of(w->S[29], w->S[29]),
-            lane_pair_load(&m->G[15])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[27], w->S[27]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[28], w->S[28]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[29], w->S[29]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][21], pair);
+    }
     w->term[0][23] = w->S[27]*m->G[11] + w->S[28]*m->G[14] + w->S[29]*m->G[17];
-    lane_pair_store(&w->term[0][24],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[32],
-            w->S[32]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[33], w->S[33]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[34], w->S[34]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[32], w->S[32]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[33], w->S[33]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[34], w->S[34]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][24], pair);
+    }
     w->term[0][26] = w->S[32]*m->G[2] + w->S[33]*m->G[5] + w->S[34]*m->G[8];
-    lane_pair_store(&w->term[0][27],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[35],
-            w->S[35]), lane_pair_load(&m->G[9])), lane_pair_of(w->S[36], w->S[36]),
-            lane_pair_load(&m->G[12])), lane_pair_of(w->S[37], w->S[37]),
-            lane_pair_load(&m->G[15])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[35], w->S[35]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[36], w->S[36]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][27], pair);
+    }
     w->term[0][29] = w->S[35]*m->G[11] + w->S[36]*m->G[14] + w->S[37]*m->G[17];
-    lane_pair_store(&w->term[0][30],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[40],
-            w->S[40]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[41], w->S[41]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[42], w->S[42]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[40], w->S[40]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[41], w->S[41]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[42], w->S[42]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][30], pair);
+    }
     w->term[0][32] = w->S[40]*m->G[2] + w->S[41]*m->G[5] + w->S[42]*m->G[8];
-    lane_pair_store(&w->term[0][33],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[43],
-            w->S[43]), lane_pair_load(&m->G[9])), lane_pair_of(w->S[44], w->S[44]),
-            lane_pair_load(&m->G[12])), lane_pair_of(w->S[45], w->S[45]),
-            lane_pair_load(&m->G[15])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[43], w->S[43]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[44], w->S[44]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[45], w->S[45]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][33], pair);
+    }
     w->term[0][35] = w->S[43]*m->G[11] + w->S[44]*m->G[14] + w->S[45]*m->G[17];
-    lane_pair_store(&w->term[0][36],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[48],
-            w->S[48]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[49], w->S[49]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[50], w->S[50]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][36], pair);
+    }
     w->term[0][38] = w->S[48]*m->G[2] + w->S[49]*m->G[5] + w->S[50]*m->G[8];
-    lane_pair_store(&w->term[0][39],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[51],
-            w->S[51]), lane_pair_load(&m->G[9])), lane_pair_of(w->S[52], w->S[52]),
-            lane_pair_load(&m->G[12])), lane_pair_of(w->S[53], w->S[53]),
-            lane_pair_load(&m->G[15])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[51], w->S[51]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[52], w->S[52]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[53], w->S[53]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][39], pair);
+    }
     w->term[0][41] = w->S[51]*m->G[11] + w->S[52]*m->G[14] + w->S[53]*m->G[17];
-    lane_pair_store(&w->term[0][42],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[56],
-            w->S[56]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[57], w->S[57]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[58], w->S[58]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[56], w->S[56]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[57], w->S[57]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[58], w->S[58]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][42], pair);
+    }
     w->term[0][44] = w->S[56]*m->G[2] + w->S[57]*m->G[5] + w->S[58]*m->G[8];
-    lane_pair_store(&w->term[0][45],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[59],
-            w->S[59]), lane_pair_load(&m->G[9])), lane_pair_of(w->S[60], w->S[60]),
-            lane_pair_load(&m->G[12])), lane_pair_of(w->S[61], w->S[61]),
-            lane_pair_load(&m->G[15])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[59], w->S[59]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[60], w->S[60]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][45], pair);
+    }
     w->term[0][47] = w->S[59]*m->G[11] + w->S[60]*m->G[14] + w->S[61]*m->G[17];
-    lane_pair_store(&w->term[0][48],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[64],
-            w->S[64]), lane_pair_load(&m->G[0])), lane_pair_of(w->S[65], w->S[65]),
-            lane_pair_load(&m->G[3])), lane_pair_of(w->S[66], w->S[66]), lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[64], w->S[64]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[65], w->S[65]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[66], w->S[66]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][48], pair);
+    }
     w->term[0][50] = w->S[64]*m->G[2] + w->S[65]*m->G[5] + w->S[66]*m->G[8];
-    lane_pair_store(&w->term[0][51],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[67],
-            w->S[67]), lane_pair_load(&m->G[9])), lane_pair_of(w->S[68], w->S[68]),
-            lane_pair_load(&m->G[12])), lane_pair_of(w->S[69], w->S[69]),
-            lane_pair_load(&m->G[15])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[67], w->S[67]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[68], w->S[68]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[69], w->S[69]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][51], pair);
+    }
     w->term[0][53] = w->S[67]*m->G[11] + w->S[68]*m->G[14] + w->S[69]*m->G[17];
 }
 
 INS_GPS15_BLOCK void process_noise(const ins_gps15_matrices *restrict m, ins_gps15_transition
         *restrict t, ins_gps15_discretize_scratch *restrict w, const ins_gps15_scalar T)
 {
-    lane_pair_store(&w->term[1][54], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[0])));
-    lane_pair_store(&w->term[1][56], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[2])));
-    lane_pair_store(&w->term[1][58], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[4])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[0]));
+        lane_pair_store(&w->term[1][54], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[2]));
+        lane_pair_store(&w->term[1][56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[4]));
+        lane_pair_store(&w->term[1][58], pair);
+    }
     w->term[1][0] = w->term[0][0]*w->term[1][54];
     w->term[1][1] = w->term[0][1]*w->term[1][55];
     w->term[1][2] = w->term[0][2]*w->term[1][56];

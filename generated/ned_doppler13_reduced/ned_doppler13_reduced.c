@@ -768,41 +768,69 @@ NED_DOPPLER13_REDUCED_BLOCK void horner_last_into_S(ned_doppler13_reduced_discre
 NED_DOPPLER13_REDUCED_BLOCK void horner_unit_columns(ned_doppler13_reduced_discretize_scratch
         *restrict w)
 {
-    lane_pair_store(&w->S[58],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][0],
-            w->term[1][0]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][1], w->term[1][1]),
-            lane_pair_load(&w->fh[11])), lane_pair_of(w->term[1][2], w->term[1][2]),
-            lane_pair_load(&w->fh[19])));
-    lane_pair_store(&w->S[60],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][8],
-            w->term[1][8]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][9], w->term[1][9]),
-            lane_pair_load(&w->fh[11])), lane_pair_of(w->term[1][10], w->term[1][10]),
-            lane_pair_load(&w->fh[19])));
-    lane_pair_store(&w->S[62],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][16],
-            w->term[1][16]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][17],
-            w->term[1][17]), lane_pair_load(&w->fh[11])), lane_pair_of(w->term[1][18],
-            w->term[1][18]), lane_pair_load(&w->fh[19])));
-    lane_pair_store(&w->S[64],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][24],
-            w->term[1][24]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][25],
-            w->term[1][25]), lane_pair_load(&w->fh[11])), lane_pair_of(w->term[1][26],
-            w->term[1][26]), lane_pair_load(&w->fh[19])));
-    lane_pair_store(&w->S[66],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][32],
-            w->term[1][32]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][33],
-            w->term[1][33]), lane_pair_load(&w->fh[11])), lane_pair_of(w->term[1][34],
-            w->term[1][34]), lane_pair_load(&w->fh[19])));
-    lane_pair_store(&w->S[68],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][40],
-            w->term[1][40]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][41],
-            w->term[1][41]), lane_pair_load(&w->fh[11])), lane_pair_of(w->term[1][42],
-            w->term[1][42]), lane_pair_load(&w->fh[19])));
-    lane_pair_store(&w->S[71],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][48],
-            w->term[1][48]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][49],
-            w->term[1][49]), lane_pair_load(&w->fh[11])), lane_pair_of(w->term[1][50],
-            w->term[1][50]), lane_pair_load(&w->fh[19])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&w->S[58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][8], w->term[1][8]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][9], w->term[1][9]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][10], w->term[1][10]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&w->S[60], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][16], w->term[1][16]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][17], w->term[1][17]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][18], w->term[1][18]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&w->S[62], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&w->S[64], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][32], w->term[1][32]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][33], w->term[1][33]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][34], w->term[1][34]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&w->S[66], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][40], w->term[1][40]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][41], w->term[1][41]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][42], w->term[1][42]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&w->S[68], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&w->S[71], pair);
+    }
 }
 
 NED_DOPPLER13_REDUCED_BLOCK void horner_transition(ned_doppler13_reduced_transition *restrict t,
@@ -868,41 +896,69 @@ NED_DOPPLER13_REDUCED_BLOCK void horner_transition(ned_doppler13_reduced_transit
     t->Phi[29] = t->Phi[29] + w->fh[22]*w->S[57];
     t->Phi[73] = w->fh[36]*w->S[56];
     t->Phi[74] = w->fh[37]*w->S[57];
-    lane_pair_store(&t->Phi[6],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[0],
-            w->S[0]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[1], w->S[1]),
-            lane_pair_load(&w->fh[11])), lane_pair_of(w->S[2], w->S[2]),
-            lane_pair_load(&w->fh[19])));
-    lane_pair_store(&t->Phi[16],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[8],
-            w->S[8]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[9], w->S[9]),
-            lane_pair_load(&w->fh[11])), lane_pair_of(w->S[10], w->S[10]),
-            lane_pair_load(&w->fh[19])));
-    lane_pair_store(&t->Phi[26],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[16],
-            w->S[16]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[17], w->S[17]),
-            lane_pair_load(&w->fh[11])), lane_pair_of(w->S[18], w->S[18]),
-            lane_pair_load(&w->fh[19])));
-    lane_pair_store(&t->Phi[36],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[24],
-            w->S[24]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[25], w->S[25]),
-            lane_pair_load(&w->fh[11])), lane_pair_of(w->S[26], w->S[26]),
-            lane_pair_load(&w->fh[19])));
-    lane_pair_store(&t->Phi[46],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[32],
-            w->S[32]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[33], w->S[33]),
-            lane_pair_load(&w->fh[11])), lane_pair_of(w->S[34], w->S[34]),
-            lane_pair_load(&w->fh[19])));
-    lane_pair_store(&t->Phi[56],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[40],
-            w->S[40]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[41], w->S[41]),
-            lane_pair_load(&w->fh[11])), lane_pair_of(w->S[42], w->S[42]),
-            lane_pair_load(&w->fh[19])));
-    lane_pair_store(&t->Phi[67],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[48],
-            w->S[48]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[49], w->S[49]),
-            lane_pair_load(&w->fh[11])), lane_pair_of(w->S[50], w->S[50]),
-            lane_pair_load(&w->fh[19])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&t->Phi[6], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[8], w->S[8]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[9], w->S[9]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[10], w->S[10]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&t->Phi[16], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[16], w->S[16]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[17], w->S[17]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[18], w->S[18]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&t->Phi[26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&t->Phi[36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[32], w->S[32]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[33], w->S[33]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[34], w->S[34]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&t->Phi[46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[40], w->S[40]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[41], w->S[41]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[42], w->S[42]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&t->Phi[56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&t->Phi[67], pair);
+    }
     t->Phi[66] = 0;
     t->Phi[71] = one;
     t->Phi[72] = one;
@@ -1303,51 +1359,79 @@ NED_DOPPLER13_REDUCED_BLOCK void noise_input(const ned_doppler13_reduced_matrice
     w->term[0][0] = w->S[6]*m->G[9];
     w->term[0][1] = w->S[7]*m->G[10];
     w->term[0][2] = w->S[0]*m->G[0] + w->S[1]*m->G[1] + w->S[2]*m->G[2];
-    lane_pair_store(&w->term[0][3], lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[3],
-            w->S[3]), lane_pair_load(&m->G[3])), lane_pair_of(w->S[4], w->S[4]),
-            lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[3], w->S[3]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[4], w->S[4]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][3], pair);
+    }
     w->term[0][5] = w->S[3]*m->G[5] + w->S[4]*m->G[8];
     w->term[0][6] = w->S[14]*m->G[9];
     w->term[0][7] = w->S[15]*m->G[10];
     w->term[0][8] = w->S[8]*m->G[0] + w->S[9]*m->G[1] + w->S[10]*m->G[2];
-    lane_pair_store(&w->term[0][9], lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[11],
-            w->S[11]), lane_pair_load(&m->G[3])), lane_pair_of(w->S[12], w->S[12]),
-            lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[11], w->S[11]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[12], w->S[12]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][9], pair);
+    }
     w->term[0][11] = w->S[11]*m->G[5] + w->S[12]*m->G[8];
     w->term[0][12] = w->S[22]*m->G[9];
     w->term[0][13] = w->S[23]*m->G[10];
     w->term[0][14] = w->S[16]*m->G[0] + w->S[17]*m->G[1] + w->S[18]*m->G[2];
-    lane_pair_store(&w->term[0][15], lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[19],
-            w->S[19]), lane_pair_load(&m->G[3])), lane_pair_of(w->S[20], w->S[20]),
-            lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[19], w->S[19]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[20], w->S[20]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][15], pair);
+    }
     w->term[0][17] = w->S[19]*m->G[5] + w->S[20]*m->G[8];
     w->term[0][18] = w->S[30]*m->G[9];
     w->term[0][19] = w->S[31]*m->G[10];
     w->term[0][20] = w->S[24]*m->G[0] + w->S[25]*m->G[1] + w->S[26]*m->G[2];
-    lane_pair_store(&w->term[0][21], lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[27],
-            w->S[27]), lane_pair_load(&m->G[3])), lane_pair_of(w->S[28], w->S[28]),
-            lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[27], w->S[27]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[28], w->S[28]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][21], pair);
+    }
     w->term[0][23] = w->S[27]*m->G[5] + w->S[28]*m->G[8];
     w->term[0][24] = w->S[38]*m->G[9];
     w->term[0][25] = w->S[39]*m->G[10];
     w->term[0][26] = w->S[32]*m->G[0] + w->S[33]*m->G[1] + w->S[34]*m->G[2];
-    lane_pair_store(&w->term[0][27], lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[35],
-            w->S[35]), lane_pair_load(&m->G[3])), lane_pair_of(w->S[36], w->S[36]),
-            lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[35], w->S[35]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[36], w->S[36]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][27], pair);
+    }
     w->term[0][29] = w->S[35]*m->G[5] + w->S[36]*m->G[8];
     w->term[0][30] = w->S[46]*m->G[9];
     w->term[0][31] = w->S[47]*m->G[10];
     w->term[0][32] = w->S[40]*m->G[0] + w->S[41]*m->G[1] + w->S[42]*m->G[2];
-    lane_pair_store(&w->term[0][33], lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[43],
-            w->S[43]), lane_pair_load(&m->G[3])), lane_pair_of(w->S[44], w->S[44]),
-            lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[43], w->S[43]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[44], w->S[44]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][33], pair);
+    }
     w->term[0][35] = w->S[43]*m->G[5] + w->S[44]*m->G[8];
     w->term[0][36] = w->S[54]*m->G[9];
     w->term[0][37] = w->S[55]*m->G[10];
     w->term[0][38] = w->S[48]*m->G[0] + w->S[49]*m->G[1] + w->S[50]*m->G[2];
-    lane_pair_store(&w->term[0][39], lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[51],
-            w->S[51]), lane_pair_load(&m->G[3])), lane_pair_of(w->S[52], w->S[52]),
-            lane_pair_load(&m->G[6])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[51], w->S[51]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[52], w->S[52]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][39], pair);
+    }
     w->term[0][41] = w->S[51]*m->G[5] + w->S[52]*m->G[8];
     w->term[0][42] = w->S[56]*m->G[9];
     w->term[0][43] = w->S[57]*m->G[10];
@@ -1357,12 +1441,18 @@ NED_DOPPLER13_REDUCED_BLOCK void process_noise(const ned_doppler13_reduced_matri
         ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_discretize_scratch
         *restrict w, const ned_doppler13_reduced_scalar T)
 {
-    lane_pair_store(&w->term[1][44], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[0])));
-    lane_pair_store(&w->term[1][46], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[2])));
-    lane_pair_store(&w->term[1][48], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[4])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[0]));
+        lane_pair_store(&w->term[1][44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[2]));
+        lane_pair_store(&w->term[1][46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[4]));
+        lane_pair_store(&w->term[1][48], pair);
+    }
     w->term[1][0] = w->term[0][0]*w->term[1][44];
     w->term[1][1] = w->term[0][1]*w->term[1][45];
     w->term[1][2] = w->term[0][2]*w->term[1][46];

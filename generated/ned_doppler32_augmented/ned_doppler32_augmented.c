@@ -1241,222 +1241,390 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_last_into_S(ned_doppler32_augmented_di
 NED_DOPPLER32_AUGMENTED_BLOCK void horner_unit_columns(ned_doppler32_augmented_discretize_scratch
         *restrict w)
 {
-    lane_pair_store(&w->S[90],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][0],
-            w->term[1][0]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][1], w->term[1][1]),
-            lane_pair_load(&w->fh[22])), lane_pair_of(w->term[1][2], w->term[1][2]),
-            lane_pair_load(&w->fh[41])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&w->S[90], pair);
+    }
     w->S[92] = w->term[1][0]*w->fh[6] + w->term[1][1]*w->fh[24] + w->term[1][2]*w->fh[43];
-    lane_pair_store(&w->S[93],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][0],
-            w->term[1][0]), lane_pair_load(&w->fh[10])), lane_pair_of(w->term[1][1], w->term[1][1]),
-            lane_pair_load(&w->fh[28])), lane_pair_of(w->term[1][2], w->term[1][2]),
-            lane_pair_load(&w->fh[47])));
-    lane_pair_store(&w->S[95],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][0],
-            w->term[1][0]), lane_pair_load(&w->fh[12])), lane_pair_of(w->term[1][1], w->term[1][1]),
-            lane_pair_load(&w->fh[30])), lane_pair_of(w->term[1][2], w->term[1][2]),
-            lane_pair_load(&w->fh[49])));
-    lane_pair_store(&w->S[97],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][0],
-            w->term[1][0]), lane_pair_load(&w->fh[14])), lane_pair_of(w->term[1][1], w->term[1][1]),
-            lane_pair_load(&w->fh[32])), lane_pair_of(w->term[1][2], w->term[1][2]),
-            lane_pair_load(&w->fh[51])));
-    lane_pair_store(&w->S[99],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][0],
-            w->term[1][0]), lane_pair_load(&w->fh[16])), lane_pair_of(w->term[1][1], w->term[1][1]),
-            lane_pair_load(&w->fh[34])), lane_pair_of(w->term[1][2], w->term[1][2]),
-            lane_pair_load(&w->fh[53])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&w->S[93], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[95], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&w->S[97], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&w->S[99], pair);
+    }
     w->S[101] = w->term[1][0]*w->fh[18] + w->term[1][1]*w->fh[36] + w->term[1][2]*w->fh[55];
-    lane_pair_store(&w->S[102], lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][3],
-            w->term[1][3]), lane_pair_load(&w->fh[64])), lane_pair_of(w->term[1][4], w->term[1][4]),
-            lane_pair_load(&w->fh[75])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][3], w->term[1][3]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][4], w->term[1][4]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&w->S[102], pair);
+    }
     w->S[104] = w->term[1][3]*w->fh[66] + w->term[1][4]*w->fh[77];
-    lane_pair_store(&w->S[105],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][12],
-            w->term[1][12]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][13],
-            w->term[1][13]), lane_pair_load(&w->fh[22])), lane_pair_of(w->term[1][14],
-            w->term[1][14]), lane_pair_load(&w->fh[41])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][12], w->term[1][12]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][14], w->term[1][14]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&w->S[105], pair);
+    }
     w->S[107] = w->term[1][12]*w->fh[6] + w->term[1][13]*w->fh[24] + w->term[1][14]*w->fh[43];
-    lane_pair_store(&w->S[108],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][12],
-            w->term[1][12]), lane_pair_load(&w->fh[10])), lane_pair_of(w->term[1][13],
-            w->term[1][13]), lane_pair_load(&w->fh[28])), lane_pair_of(w->term[1][14],
-            w->term[1][14]), lane_pair_load(&w->fh[47])));
-    lane_pair_store(&w->S[110],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][12],
-            w->term[1][12]), lane_pair_load(&w->fh[12])), lane_pair_of(w->term[1][13],
-            w->term[1][13]), lane_pair_load(&w->fh[30])), lane_pair_of(w->term[1][14],
-            w->term[1][14]), lane_pair_load(&w->fh[49])));
-    lane_pair_store(&w->S[112],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][12],
-            w->term[1][12]), lane_pair_load(&w->fh[14])), lane_pair_of(w->term[1][13],
-            w->term[1][13]), lane_pair_load(&w->fh[32])), lane_pair_of(w->term[1][14],
-            w->term[1][14]), lane_pair_load(&w->fh[51])));
-    lane_pair_store(&w->S[114],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][12],
-            w->term[1][12]), lane_pair_load(&w->fh[16])), lane_pair_of(w->term[1][13],
-            w->term[1][13]), lane_pair_load(&w->fh[34])), lane_pair_of(w->term[1][14],
-            w->term[1][14]), lane_pair_load(&w->fh[53])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][12], w->term[1][12]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][14], w->term[1][14]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&w->S[108], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][12], w->term[1][12]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][14], w->term[1][14]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[110], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][12], w->term[1][12]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][14], w->term[1][14]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&w->S[112], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][12], w->term[1][12]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][14], w->term[1][14]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&w->S[114], pair);
+    }
     w->S[116] = w->term[1][12]*w->fh[18] + w->term[1][13]*w->fh[36] + w->term[1][14]*w->fh[55];
-    lane_pair_store(&w->S[117], lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][15],
-            w->term[1][15]), lane_pair_load(&w->fh[64])), lane_pair_of(w->term[1][16],
-            w->term[1][16]), lane_pair_load(&w->fh[75])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][15], w->term[1][15]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][16], w->term[1][16]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&w->S[117], pair);
+    }
     w->S[119] = w->term[1][15]*w->fh[66] + w->term[1][16]*w->fh[77];
-    lane_pair_store(&w->S[120],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][24],
-            w->term[1][24]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][25],
-            w->term[1][25]), lane_pair_load(&w->fh[22])), lane_pair_of(w->term[1][26],
-            w->term[1][26]), lane_pair_load(&w->fh[41])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&w->S[120], pair);
+    }
     w->S[122] = w->term[1][24]*w->fh[6] + w->term[1][25]*w->fh[24] + w->term[1][26]*w->fh[43];
-    lane_pair_store(&w->S[123],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][24],
-            w->term[1][24]), lane_pair_load(&w->fh[10])), lane_pair_of(w->term[1][25],
-            w->term[1][25]), lane_pair_load(&w->fh[28])), lane_pair_of(w->term[1][26],
-            w->term[1][26]), lane_pair_load(&w->fh[47])));
-    lane_pair_store(&w->S[125],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][24],
-            w->term[1][24]), lane_pair_load(&w->fh[12])), lane_pair_of(w->term[1][25],
-            w->term[1][25]), lane_pair_load(&w->fh[30])), lane_pair_of(w->term[1][26],
-            w->term[1][26]), lane_pair_load(&w->fh[49])));
-    lane_pair_store(&w->S[127],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][24],
-            w->term[1][24]), lane_pair_load(&w->fh[14])), lane_pair_of(w->term[1][25],
-            w->term[1][25]), lane_pair_load(&w->fh[32])), lane_pair_of(w->term[1][26],
-            w->term[1][26]), lane_pair_load(&w->fh[51])));
-    lane_pair_store(&w->S[129],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][24],
-            w->term[1][24]), lane_pair_load(&w->fh[16])), lane_pair_of(w->term[1][25],
-            w->term[1][25]), lane_pair_load(&w->fh[34])), lane_pair_of(w->term[1][26],
-            w->term[1][26]), lane_pair_load(&w->fh[53])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&w->S[123], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[125], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&w->S[127], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&w->S[129], pair);
+    }
     w->S[131] = w->term[1][24]*w->fh[18] + w->term[1][25]*w->fh[36] + w->term[1][26]*w->fh[55];
-    lane_pair_store(&w->S[132], lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][27],
-            w->term[1][27]), lane_pair_load(&w->fh[64])), lane_pair_of(w->term[1][28],
-            w->term[1][28]), lane_pair_load(&w->fh[75])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][27], w->term[1][27]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][28], w->term[1][28]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&w->S[132], pair);
+    }
     w->S[134] = w->term[1][27]*w->fh[66] + w->term[1][28]*w->fh[77];
-    lane_pair_store(&w->S[135],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][36],
-            w->term[1][36]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][37],
-            w->term[1][37]), lane_pair_load(&w->fh[22])), lane_pair_of(w->term[1][38],
-            w->term[1][38]), lane_pair_load(&w->fh[41])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][36], w->term[1][36]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][38], w->term[1][38]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&w->S[135], pair);
+    }
     w->S[137] = w->term[1][36]*w->fh[6] + w->term[1][37]*w->fh[24] + w->term[1][38]*w->fh[43];
-    lane_pair_store(&w->S[138],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][36],
-            w->term[1][36]), lane_pair_load(&w->fh[10])), lane_pair_of(w->term[1][37],
-            w->term[1][37]), lane_pair_load(&w->fh[28])), lane_pair_of(w->term[1][38],
-            w->term[1][38]), lane_pair_load(&w->fh[47])));
-    lane_pair_store(&w->S[140],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][36],
-            w->term[1][36]), lane_pair_load(&w->fh[12])), lane_pair_of(w->term[1][37],
-            w->term[1][37]), lane_pair_load(&w->fh[30])), lane_pair_of(w->term[1][38],
-            w->term[1][38]), lane_pair_load(&w->fh[49])));
-    lane_pair_store(&w->S[142],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][36],
-            w->term[1][36]), lane_pair_load(&w->fh[14])), lane_pair_of(w->term[1][37],
-            w->term[1][37]), lane_pair_load(&w->fh[32])), lane_pair_of(w->term[1][38],
-            w->term[1][38]), lane_pair_load(&w->fh[51])));
-    lane_pair_store(&w->S[144],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][36],
-            w->term[1][36]), lane_pair_load(&w->fh[16])), lane_pair_of(w->term[1][37],
-            w->term[1][37]), lane_pair_load(&w->fh[34])), lane_pair_of(w->term[1][38],
-            w->term[1][38]), lane_pair_load(&w->fh[53])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][36], w->term[1][36]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][38], w->term[1][38]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&w->S[138], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][36], w->term[1][36]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][38], w->term[1][38]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[140], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][36], w->term[1][36]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][38], w->term[1][38]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&w->S[142], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][36], w->term[1][36]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][38], w->term[1][38]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&w->S[144], pair);
+    }
     w->S[146] = w->term[1][36]*w->fh[18] + w->term[1][37]*w->fh[36] + w->term[1][38]*w->fh[55];
-    lane_pair_store(&w->S[147], lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][39],
-            w->term[1][39]), lane_pair_load(&w->fh[64])), lane_pair_of(w->term[1][40],
-            w->term[1][40]), lane_pair_load(&w->fh[75])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][39], w->term[1][39]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][40], w->term[1][40]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&w->S[147], pair);
+    }
     w->S[149] = w->term[1][39]*w->fh[66] + w->term[1][40]*w->fh[77];
-    lane_pair_store(&w->S[150],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][48],
-            w->term[1][48]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][49],
-            w->term[1][49]), lane_pair_load(&w->fh[22])), lane_pair_of(w->term[1][50],
-            w->term[1][50]), lane_pair_load(&w->fh[41])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&w->S[150], pair);
+    }
     w->S[152] = w->term[1][48]*w->fh[6] + w->term[1][49]*w->fh[24] + w->term[1][50]*w->fh[43];
-    lane_pair_store(&w->S[153],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][48],
-            w->term[1][48]), lane_pair_load(&w->fh[10])), lane_pair_of(w->term[1][49],
-            w->term[1][49]), lane_pair_load(&w->fh[28])), lane_pair_of(w->term[1][50],
-            w->term[1][50]), lane_pair_load(&w->fh[47])));
-    lane_pair_store(&w->S[155],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][48],
-            w->term[1][48]), lane_pair_load(&w->fh[12])), lane_pair_of(w->term[1][49],
-            w->term[1][49]), lane_pair_load(&w->fh[30])), lane_pair_of(w->term[1][50],
-            w->term[1][50]), lane_pair_load(&w->fh[49])));
-    lane_pair_store(&w->S[157],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][48],
-            w->term[1][48]), lane_pair_load(&w->fh[14])), lane_pair_of(w->term[1][49],
-            w->term[1][49]), lane_pair_load(&w->fh[32])), lane_pair_of(w->term[1][50],
-            w->term[1][50]), lane_pair_load(&w->fh[51])));
-    lane_pair_store(&w->S[159],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][48],
-            w->term[1][48]), lane_pair_load(&w->fh[16])), lane_pair_of(w->term[1][49],
-            w->term[1][49]), lane_pair_load(&w->fh[34])), lane_pair_of(w->term[1][50],
-            w->term[1][50]), lane_pair_load(&w->fh[53])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&w->S[153], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[155], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&w->S[157], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&w->S[159], pair);
+    }
     w->S[161] = w->term[1][48]*w->fh[18] + w->term[1][49]*w->fh[36] + w->term[1][50]*w->fh[55];
-    lane_pair_store(&w->S[162], lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][51],
-            w->term[1][51]), lane_pair_load(&w->fh[64])), lane_pair_of(w->term[1][52],
-            w->term[1][52]), lane_pair_load(&w->fh[75])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][51], w->term[1][51]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][52], w->term[1][52]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&w->S[162], pair);
+    }
     w->S[164] = w->term[1][51]*w->fh[66] + w->term[1][52]*w->fh[77];
-    lane_pair_store(&w->S[165],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][60],
-            w->term[1][60]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][61],
-            w->term[1][61]), lane_pair_load(&w->fh[22])), lane_pair_of(w->term[1][62],
-            w->term[1][62]), lane_pair_load(&w->fh[41])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][60], w->term[1][60]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][62], w->term[1][62]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&w->S[165], pair);
+    }
     w->S[167] = w->term[1][60]*w->fh[6] + w->term[1][61]*w->fh[24] + w->term[1][62]*w->fh[43];
-    lane_pair_store(&w->S[168],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][60],
-            w->term[1][60]), lane_pair_load(&w->fh[10])), lane_pair_of(w->term[1][61],
-            w->term[1][61]), lane_pair_load(&w->fh[28])), lane_pair_of(w->term[1][62],
-            w->term[1][62]), lane_pair_load(&w->fh[47])));
-    lane_pair_store(&w->S[170],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][60],
-            w->term[1][60]), lane_pair_load(&w->fh[12])), lane_pair_of(w->term[1][61],
-            w->term[1][61]), lane_pair_load(&w->fh[30])), lane_pair_of(w->term[1][62],
-            w->term[1][62]), lane_pair_load(&w->fh[49])));
-    lane_pair_store(&w->S[172],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][60],
-            w->term[1][60]), lane_pair_load(&w->fh[14])), lane_pair_of(w->term[1][61],
-            w->term[1][61]), lane_pair_load(&w->fh[32])), lane_pair_of(w->term[1][62],
-            w->term[1][62]), lane_pair_load(&w->fh[51])));
-    lane_pair_store(&w->S[174],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][60],
-            w->term[1][60]), lane_pair_load(&w->fh[16])), lane_pair_of(w->term[1][61],
-            w->term[1][61]), lane_pair_load(&w->fh[34])), lane_pair_of(w->term[1][62],
-            w->term[1][62]), lane_pair_load(&w->fh[53])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][60], w->term[1][60]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][62], w->term[1][62]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&w->S[168], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][60], w->term[1][60]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][62], w->term[1][62]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[170], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][60], w->term[1][60]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][62], w->term[1][62]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&w->S[172], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][60], w->term[1][60]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][62], w->term[1][62]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&w->S[174], pair);
+    }
     w->S[176] = w->term[1][60]*w->fh[18] + w->term[1][61]*w->fh[36] + w->term[1][62]*w->fh[55];
-    lane_pair_store(&w->S[177], lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][63],
-            w->term[1][63]), lane_pair_load(&w->fh[64])), lane_pair_of(w->term[1][64],
-            w->term[1][64]), lane_pair_load(&w->fh[75])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][63], w->term[1][63]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][64], w->term[1][64]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&w->S[177], pair);
+    }
     w->S[179] = w->term[1][63]*w->fh[66] + w->term[1][64]*w->fh[77];
-    lane_pair_store(&w->S[181],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][72],
-            w->term[1][72]), lane_pair_load(&w->fh[4])), lane_pair_of(w->term[1][73],
-            w->term[1][73]), lane_pair_load(&w->fh[22])), lane_pair_of(w->term[1][74],
-            w->term[1][74]), lane_pair_load(&w->fh[41])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][72], w->term[1][72]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][73], w->term[1][73]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][74], w->term[1][74]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&w->S[181], pair);
+    }
     w->S[183] = w->term[1][72]*w->fh[6] + w->term[1][73]*w->fh[24] + w->term[1][74]*w->fh[43];
-    lane_pair_store(&w->S[184],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][72],
-            w->term[1][72]), lane_pair_load(&w->fh[10])), lane_pair_of(w->term[1][73],
-            w->term[1][73]), lane_pair_load(&w->fh[28])), lane_pair_of(w->term[1][74],
-            w->term[1][74]), lane_pair_load(&w->fh[47])));
-    lane_pair_store(&w->S[186],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][72],
-            w->term[1][72]), lane_pair_load(&w->fh[12])), lane_pair_of(w->term[1][73],
-            w->term[1][73]), lane_pair_load(&w->fh[30])), lane_pair_of(w->term[1][74],
-            w->term[1][74]), lane_pair_load(&w->fh[49])));
-    lane_pair_store(&w->S[188],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][72],
-            w->term[1][72]), lane_pair_load(&w->fh[14])), lane_pair_of(w->term[1][73],
-            w->term[1][73]), lane_pair_load(&w->fh[32])), lane_pair_of(w->term[1][74],
-            w->term[1][74]), lane_pair_load(&w->fh[51])));
-    lane_pair_store(&w->S[190],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][72],
-            w->term[1][72]), lane_pair_load(&w->fh[16])), lane_pair_of(w->term[1][73],
-            w->term[1][73]), lane_pair_load(&w->fh[34])), lane_pair_of(w->term[1][74],
-            w->term[1][74]), lane_pair_load(&w->fh[53])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][72], w->term[1][72]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][73], w->term[1][73]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][74], w->term[1][74]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&w->S[184], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][72], w->term[1][72]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][73], w->term[1][73]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][74], w->term[1][74]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[186], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][72], w->term[1][72]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][73], w->term[1][73]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][74], w->term[1][74]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&w->S[188], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][72], w->term[1][72]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][73], w->term[1][73]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][74], w->term[1][74]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&w->S[190], pair);
+    }
     w->S[192] = w->term[1][72]*w->fh[18] + w->term[1][73]*w->fh[36] + w->term[1][74]*w->fh[55];
-    lane_pair_store(&w->S[193], lane_pair_add_product(lane_pair_product(lane_pair_of(w->term[1][75],
-            w->term[1][75]), lane_pair_load(&w->fh[64])), lane_pair_of(w->term[1][76],
-            w->term[1][76]), lane_pair_load(&w->fh[75])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][75], w->term[1][75]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][76], w->term[1][76]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&w->S[193], pair);
+    }
     w->S[195] = w->term[1][75]*w->fh[66] + w->term[1][76]*w->fh[77];
 }
 
@@ -1510,222 +1678,390 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[196] = w->fh[84]*w->S[87];
     t->Phi[197] = w->fh[85]*w->S[88];
     t->Phi[198] = w->fh[86]*w->S[89];
-    lane_pair_store(&t->Phi[6],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[0],
-            w->S[0]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[1], w->S[1]),
-            lane_pair_load(&w->fh[22])), lane_pair_of(w->S[2], w->S[2]),
-            lane_pair_load(&w->fh[41])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&t->Phi[6], pair);
+    }
     t->Phi[8] = w->S[0]*w->fh[6] + w->S[1]*w->fh[24] + w->S[2]*w->fh[43];
-    lane_pair_store(&t->Phi[15],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[0],
-            w->S[0]), lane_pair_load(&w->fh[10])), lane_pair_of(w->S[1], w->S[1]),
-            lane_pair_load(&w->fh[28])), lane_pair_of(w->S[2], w->S[2]),
-            lane_pair_load(&w->fh[47])));
-    lane_pair_store(&t->Phi[17],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[0],
-            w->S[0]), lane_pair_load(&w->fh[12])), lane_pair_of(w->S[1], w->S[1]),
-            lane_pair_load(&w->fh[30])), lane_pair_of(w->S[2], w->S[2]),
-            lane_pair_load(&w->fh[49])));
-    lane_pair_store(&t->Phi[19],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[0],
-            w->S[0]), lane_pair_load(&w->fh[14])), lane_pair_of(w->S[1], w->S[1]),
-            lane_pair_load(&w->fh[32])), lane_pair_of(w->S[2], w->S[2]),
-            lane_pair_load(&w->fh[51])));
-    lane_pair_store(&t->Phi[21],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[0],
-            w->S[0]), lane_pair_load(&w->fh[16])), lane_pair_of(w->S[1], w->S[1]),
-            lane_pair_load(&w->fh[34])), lane_pair_of(w->S[2], w->S[2]),
-            lane_pair_load(&w->fh[53])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&t->Phi[15], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[17], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&t->Phi[19], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&t->Phi[21], pair);
+    }
     t->Phi[23] = w->S[0]*w->fh[18] + w->S[1]*w->fh[36] + w->S[2]*w->fh[55];
-    lane_pair_store(&t->Phi[24], lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[3],
-            w->S[3]), lane_pair_load(&w->fh[64])), lane_pair_of(w->S[4], w->S[4]),
-            lane_pair_load(&w->fh[75])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[3], w->S[3]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[4], w->S[4]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&t->Phi[24], pair);
+    }
     t->Phi[26] = w->S[3]*w->fh[66] + w->S[4]*w->fh[77];
-    lane_pair_store(&t->Phi[33],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[12],
-            w->S[12]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[13], w->S[13]),
-            lane_pair_load(&w->fh[22])), lane_pair_of(w->S[14], w->S[14]),
-            lane_pair_load(&w->fh[41])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[12], w->S[12]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[14], w->S[14]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&t->Phi[33], pair);
+    }
     t->Phi[35] = w->S[12]*w->fh[6] + w->S[13]*w->fh[24] + w->S[14]*w->fh[43];
-    lane_pair_store(&t->Phi[42],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[12],
-            w->S[12]), lane_pair_load(&w->fh[10])), lane_pair_of(w->S[13], w->S[13]),
-            lane_pair_load(&w->fh[28])), lane_pair_of(w->S[14], w->S[14]),
-            lane_pair_load(&w->fh[47])));
-    lane_pair_store(&t->Phi[44],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[12],
-            w->S[12]), lane_pair_load(&w->fh[12])), lane_pair_of(w->S[13], w->S[13]),
-            lane_pair_load(&w->fh[30])), lane_pair_of(w->S[14], w->S[14]),
-            lane_pair_load(&w->fh[49])));
-    lane_pair_store(&t->Phi[46],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[12],
-            w->S[12]), lane_pair_load(&w->fh[14])), lane_pair_of(w->S[13], w->S[13]),
-            lane_pair_load(&w->fh[32])), lane_pair_of(w->S[14], w->S[14]),
-            lane_pair_load(&w->fh[51])));
-    lane_pair_store(&t->Phi[48],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[12],
-            w->S[12]), lane_pair_load(&w->fh[16])), lane_pair_of(w->S[13], w->S[13]),
-            lane_pair_load(&w->fh[34])), lane_pair_of(w->S[14], w->S[14]),
-            lane_pair_load(&w->fh[53])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[12], w->S[12]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[14], w->S[14]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&t->Phi[42], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[12], w->S[12]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[14], w->S[14]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[12], w->S[12]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[14], w->S[14]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&t->Phi[46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[12], w->S[12]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[14], w->S[14]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&t->Phi[48], pair);
+    }
     t->Phi[50] = w->S[12]*w->fh[18] + w->S[13]*w->fh[36] + w->S[14]*w->fh[55];
-    lane_pair_store(&t->Phi[51], lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[15],
-            w->S[15]), lane_pair_load(&w->fh[64])), lane_pair_of(w->S[16], w->S[16]),
-            lane_pair_load(&w->fh[75])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[15], w->S[15]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[16], w->S[16]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&t->Phi[51], pair);
+    }
     t->Phi[53] = w->S[15]*w->fh[66] + w->S[16]*w->fh[77];
-    lane_pair_store(&t->Phi[60],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[24],
-            w->S[24]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[25], w->S[25]),
-            lane_pair_load(&w->fh[22])), lane_pair_of(w->S[26], w->S[26]),
-            lane_pair_load(&w->fh[41])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&t->Phi[60], pair);
+    }
     t->Phi[62] = w->S[24]*w->fh[6] + w->S[25]*w->fh[24] + w->S[26]*w->fh[43];
-    lane_pair_store(&t->Phi[69],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[24],
-            w->S[24]), lane_pair_load(&w->fh[10])), lane_pair_of(w->S[25], w->S[25]),
-            lane_pair_load(&w->fh[28])), lane_pair_of(w->S[26], w->S[26]),
-            lane_pair_load(&w->fh[47])));
-    lane_pair_store(&t->Phi[71],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[24],
-            w->S[24]), lane_pair_load(&w->fh[12])), lane_pair_of(w->S[25], w->S[25]),
-            lane_pair_load(&w->fh[30])), lane_pair_of(w->S[26], w->S[26]),
-            lane_pair_load(&w->fh[49])));
-    lane_pair_store(&t->Phi[73],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[24],
-            w->S[24]), lane_pair_load(&w->fh[14])), lane_pair_of(w->S[25], w->S[25]),
-            lane_pair_load(&w->fh[32])), lane_pair_of(w->S[26], w->S[26]),
-            lane_pair_load(&w->fh[51])));
-    lane_pair_store(&t->Phi[75],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[24],
-            w->S[24]), lane_pair_load(&w->fh[16])), lane_pair_of(w->S[25], w->S[25]),
-            lane_pair_load(&w->fh[34])), lane_pair_of(w->S[26], w->S[26]),
-            lane_pair_load(&w->fh[53])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&t->Phi[69], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[71], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&t->Phi[73], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&t->Phi[75], pair);
+    }
     t->Phi[77] = w->S[24]*w->fh[18] + w->S[25]*w->fh[36] + w->S[26]*w->fh[55];
-    lane_pair_store(&t->Phi[78], lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[27],
-            w->S[27]), lane_pair_load(&w->fh[64])), lane_pair_of(w->S[28], w->S[28]),
-            lane_pair_load(&w->fh[75])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[27], w->S[27]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[28], w->S[28]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&t->Phi[78], pair);
+    }
     t->Phi[80] = w->S[27]*w->fh[66] + w->S[28]*w->fh[77];
-    lane_pair_store(&t->Phi[87],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[36],
-            w->S[36]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[37], w->S[37]),
-            lane_pair_load(&w->fh[22])), lane_pair_of(w->S[38], w->S[38]),
-            lane_pair_load(&w->fh[41])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[36], w->S[36]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[38], w->S[38]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&t->Phi[87], pair);
+    }
     t->Phi[89] = w->S[36]*w->fh[6] + w->S[37]*w->fh[24] + w->S[38]*w->fh[43];
-    lane_pair_store(&t->Phi[96],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[36],
-            w->S[36]), lane_pair_load(&w->fh[10])), lane_pair_of(w->S[37], w->S[37]),
-            lane_pair_load(&w->fh[28])), lane_pair_of(w->S[38], w->S[38]),
-            lane_pair_load(&w->fh[47])));
-    lane_pair_store(&t->Phi[98],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[36],
-            w->S[36]), lane_pair_load(&w->fh[12])), lane_pair_of(w->S[37], w->S[37]),
-            lane_pair_load(&w->fh[30])), lane_pair_of(w->S[38], w->S[38]),
-            lane_pair_load(&w->fh[49])));
-    lane_pair_store(&t->Phi[100],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[36],
-            w->S[36]), lane_pair_load(&w->fh[14])), lane_pair_of(w->S[37], w->S[37]),
-            lane_pair_load(&w->fh[32])), lane_pair_of(w->S[38], w->S[38]),
-            lane_pair_load(&w->fh[51])));
-    lane_pair_store(&t->Phi[102],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[36],
-            w->S[36]), lane_pair_load(&w->fh[16])), lane_pair_of(w->S[37], w->S[37]),
-            lane_pair_load(&w->fh[34])), lane_pair_of(w->S[38], w->S[38]),
-            lane_pair_load(&w->fh[53])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[36], w->S[36]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[38], w->S[38]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&t->Phi[96], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[36], w->S[36]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[38], w->S[38]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[98], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[36], w->S[36]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[38], w->S[38]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&t->Phi[100], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[36], w->S[36]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[38], w->S[38]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&t->Phi[102], pair);
+    }
     t->Phi[104] = w->S[36]*w->fh[18] + w->S[37]*w->fh[36] + w->S[38]*w->fh[55];
-    lane_pair_store(&t->Phi[105], lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[39],
-            w->S[39]), lane_pair_load(&w->fh[64])), lane_pair_of(w->S[40], w->S[40]),
-            lane_pair_load(&w->fh[75])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[39], w->S[39]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[40], w->S[40]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&t->Phi[105], pair);
+    }
     t->Phi[107] = w->S[39]*w->fh[66] + w->S[40]*w->fh[77];
-    lane_pair_store(&t->Phi[114],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[48],
-            w->S[48]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[49], w->S[49]),
-            lane_pair_load(&w->fh[22])), lane_pair_of(w->S[50], w->S[50]),
-            lane_pair_load(&w->fh[41])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&t->Phi[114], pair);
+    }
     t->Phi[116] = w->S[48]*w->fh[6] + w->S[49]*w->fh[24] + w->S[50]*w->fh[43];
-    lane_pair_store(&t->Phi[123],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[48],
-            w->S[48]), lane_pair_load(&w->fh[10])), lane_pair_of(w->S[49], w->S[49]),
-            lane_pair_load(&w->fh[28])), lane_pair_of(w->S[50], w->S[50]),
-            lane_pair_load(&w->fh[47])));
-    lane_pair_store(&t->Phi[125],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[48],
-            w->S[48]), lane_pair_load(&w->fh[12])), lane_pair_of(w->S[49], w->S[49]),
-            lane_pair_load(&w->fh[30])), lane_pair_of(w->S[50], w->S[50]),
-            lane_pair_load(&w->fh[49])));
-    lane_pair_store(&t->Phi[127],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[48],
-            w->S[48]), lane_pair_load(&w->fh[14])), lane_pair_of(w->S[49], w->S[49]),
-            lane_pair_load(&w->fh[32])), lane_pair_of(w->S[50], w->S[50]),
-            lane_pair_load(&w->fh[51])));
-    lane_pair_store(&t->Phi[129],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[48],
-            w->S[48]), lane_pair_load(&w->fh[16])), lane_pair_of(w->S[49], w->S[49]),
-            lane_pair_load(&w->fh[34])), lane_pair_of(w->S[50], w->S[50]),
-            lane_pair_load(&w->fh[53])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&t->Phi[123], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[125], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&t->Phi[127], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&t->Phi[129], pair);
+    }
     t->Phi[131] = w->S[48]*w->fh[18] + w->S[49]*w->fh[36] + w->S[50]*w->fh[55];
-    lane_pair_store(&t->Phi[132], lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[51],
-            w->S[51]), lane_pair_load(&w->fh[64])), lane_pair_of(w->S[52], w->S[52]),
-            lane_pair_load(&w->fh[75])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[51], w->S[51]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[52], w->S[52]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&t->Phi[132], pair);
+    }
     t->Phi[134] = w->S[51]*w->fh[66] + w->S[52]*w->fh[77];
-    lane_pair_store(&t->Phi[141],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[60],
-            w->S[60]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[61], w->S[61]),
-            lane_pair_load(&w->fh[22])), lane_pair_of(w->S[62], w->S[62]),
-            lane_pair_load(&w->fh[41])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[60], w->S[60]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[62], w->S[62]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&t->Phi[141], pair);
+    }
     t->Phi[143] = w->S[60]*w->fh[6] + w->S[61]*w->fh[24] + w->S[62]*w->fh[43];
-    lane_pair_store(&t->Phi[150],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[60],
-            w->S[60]), lane_pair_load(&w->fh[10])), lane_pair_of(w->S[61], w->S[61]),
-            lane_pair_load(&w->fh[28])), lane_pair_of(w->S[62], w->S[62]),
-            lane_pair_load(&w->fh[47])));
-    lane_pair_store(&t->Phi[152],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[60],
-            w->S[60]), lane_pair_load(&w->fh[12])), lane_pair_of(w->S[61], w->S[61]),
-            lane_pair_load(&w->fh[30])), lane_pair_of(w->S[62], w->S[62]),
-            lane_pair_load(&w->fh[49])));
-    lane_pair_store(&t->Phi[154],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[60],
-            w->S[60]), lane_pair_load(&w->fh[14])), lane_pair_of(w->S[61], w->S[61]),
-            lane_pair_load(&w->fh[32])), lane_pair_of(w->S[62], w->S[62]),
-            lane_pair_load(&w->fh[51])));
-    lane_pair_store(&t->Phi[156],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[60],
-            w->S[60]), lane_pair_load(&w->fh[16])), lane_pair_of(w->S[61], w->S[61]),
-            lane_pair_load(&w->fh[34])), lane_pair_of(w->S[62], w->S[62]),
-            lane_pair_load(&w->fh[53])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[60], w->S[60]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[62], w->S[62]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&t->Phi[150], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[60], w->S[60]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[62], w->S[62]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[152], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[60], w->S[60]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[62], w->S[62]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&t->Phi[154], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[60], w->S[60]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[62], w->S[62]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&t->Phi[156], pair);
+    }
     t->Phi[158] = w->S[60]*w->fh[18] + w->S[61]*w->fh[36] + w->S[62]*w->fh[55];
-    lane_pair_store(&t->Phi[159], lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[63],
-            w->S[63]), lane_pair_load(&w->fh[64])), lane_pair_of(w->S[64], w->S[64]),
-            lane_pair_load(&w->fh[75])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[63], w->S[63]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[64], w->S[64]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&t->Phi[159], pair);
+    }
     t->Phi[161] = w->S[63]*w->fh[66] + w->S[64]*w->fh[77];
-    lane_pair_store(&t->Phi[169],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[72],
-            w->S[72]), lane_pair_load(&w->fh[4])), lane_pair_of(w->S[73], w->S[73]),
-            lane_pair_load(&w->fh[22])), lane_pair_of(w->S[74], w->S[74]),
-            lane_pair_load(&w->fh[41])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&t->Phi[169], pair);
+    }
     t->Phi[171] = w->S[72]*w->fh[6] + w->S[73]*w->fh[24] + w->S[74]*w->fh[43];
-    lane_pair_store(&t->Phi[178],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[72],
-            w->S[72]), lane_pair_load(&w->fh[10])), lane_pair_of(w->S[73], w->S[73]),
-            lane_pair_load(&w->fh[28])), lane_pair_of(w->S[74], w->S[74]),
-            lane_pair_load(&w->fh[47])));
-    lane_pair_store(&t->Phi[180],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[72],
-            w->S[72]), lane_pair_load(&w->fh[12])), lane_pair_of(w->S[73], w->S[73]),
-            lane_pair_load(&w->fh[30])), lane_pair_of(w->S[74], w->S[74]),
-            lane_pair_load(&w->fh[49])));
-    lane_pair_store(&t->Phi[182],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[72],
-            w->S[72]), lane_pair_load(&w->fh[14])), lane_pair_of(w->S[73], w->S[73]),
-            lane_pair_load(&w->fh[32])), lane_pair_of(w->S[74], w->S[74]),
-            lane_pair_load(&w->fh[51])));
-    lane_pair_store(&t->Phi[184],
-            lane_pair_add_product(lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[72],
-            w->S[72]), lane_pair_load(&w->fh[16])), lane_pair_of(w->S[73], w->S[73]),
-            lane_pair_load(&w->fh[34])), lane_pair_of(w->S[74], w->S[74]),
-            lane_pair_load(&w->fh[53])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&t->Phi[178], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[180], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&t->Phi[182], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&t->Phi[184], pair);
+    }
     t->Phi[186] = w->S[72]*w->fh[18] + w->S[73]*w->fh[36] + w->S[74]*w->fh[55];
-    lane_pair_store(&t->Phi[187], lane_pair_add_product(lane_pair_product(lane_pair_of(w->S[75],
-            w->S[75]), lane_pair_load(&w->fh[64])), lane_pair_of(w->S[76], w->S[76]),
-            lane_pair_load(&w->fh[75])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[75], w->S[75]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[76], w->S[76]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&t->Phi[187], pair);
+    }
     t->Phi[189] = w->S[75]*w->fh[66] + w->S[76]*w->fh[77];
     t->Phi[168] = 0;
     t->Phi[190] = one;
@@ -2715,12 +3051,18 @@ NED_DOPPLER32_AUGMENTED_BLOCK void process_noise(const ned_doppler32_augmented_m
         ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_discretize_scratch
         *restrict w, const ned_doppler32_augmented_scalar T)
 {
-    lane_pair_store(&w->term[1][48], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[0])));
-    lane_pair_store(&w->term[1][50], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[2])));
-    lane_pair_store(&w->term[1][52], lane_pair_product(lane_pair_of(T, T),
-            lane_pair_load(&m->q[4])));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[0]));
+        lane_pair_store(&w->term[1][48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[2]));
+        lane_pair_store(&w->term[1][50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[4]));
+        lane_pair_store(&w->term[1][52], pair);
+    }
     w->term[1][0] = w->term[0][0]*w->term[1][48];
     w->term[1][1] = w->term[0][1]*w->term[1][49];
     w->term[1][2] = w->term[0][2]*w->term[1][50];
