@@ -28,6 +28,11 @@ tuned numbers and every sensor's NIS against chi-square.  Run it on the
 configuration as it was before stage 4 (the tuned keys at 1 / their stage-2
 values): it measures from that filter.
 
+Stage 5 (``--likelihood [CONFIG]``): the IMU white noises' shared factor at the
+maximum of the innovations' Gaussian log-likelihood of the GNSS-present flight
+(:mod:`modelgen.navigator.likelihood`), searched from the configuration's value
+(``--all``: every noise parameter, to see why the others are held).
+
 No outage is flown and no outage error is computed here: the choice cannot
 see them.  Prints a table and the chosen values, which go into
 modelgen/data/replay_drive_0708.yaml by hand (with this script named there).
@@ -35,6 +40,7 @@ modelgen/data/replay_drive_0708.yaml by hand (with this script named there).
     python bench/navigator_tuning.py            # stages 1-3 (about 5 minutes)
     python bench/navigator_tuning.py --stage3   # stage 3 only (seconds)
     python bench/navigator_tuning.py --correlation [CONFIG] [--json FILE]   # stage 4 (about a minute)
+    python bench/navigator_tuning.py --likelihood [CONFIG] [--json FILE]    # stage 5 (about half an hour)
 """
 
 from __future__ import annotations
@@ -55,6 +61,8 @@ FACTORS = (3.0, 5.0, 7.0, 10.0)
 STAGE4_FROM = {"gnss_position_variance_factor": 1.0, "gnss_velocity_variance_factor": 1.0,
                "nhc_sigma_lateral": 0.03, "nhc_sigma_vertical": 0.03, "zupt_sigma": 0.02}
 NHC_SIGMAS = (0.03, 0.05, 0.1)
+#: the white-noise factor stage 1 chose (the filter stages 4 and 5 measure from)
+STAGE1_WHITE_FACTOR = 7.0
 
 
 def _flight(args: tuple[float, float, float, str]) -> tuple[float, float, float, float, float]:
@@ -143,28 +151,42 @@ def stage3() -> None:
                   f"{s['counts']['gnss_deweighted']:18d}")
 
 
-def correlation(arguments: list[str]) -> None:
-    """Stage 4: correlation factors from the innovations with GNSS present, the tuned numbers, NIS after."""
-    import json
+def _json_option(arguments: list[str]) -> tuple[str | None, list[str]]:
+    """(FILE of ``--json FILE`` or None, the other arguments)."""
+    if "--json" not in arguments:
+        return None, arguments
+    i = arguments.index("--json")
+    return arguments[i + 1], arguments[:i] + arguments[i + 2:]
 
-    from modelgen.navigator import tuning
+
+def _stage_start(arguments: list[str]):
+    """(shipped configuration, the configuration stages 4 and 5 measure from, inputs, spec).
+
+    Stages 4 and 5 measure from the filter of stages 1-3: the keys stage 4 sets at their values before it, the
+    white-noise factor at stage 1's; stage 5 then takes the stage-4 values from the shipped configuration.
+    """
+    from modelgen.navigator import likelihood as ml
     from modelgen.navigator.config import builtin_config_path, load_config
     from modelgen.navigator.errorstate import model_path
     from modelgen.navigator.logs import read_gnss, read_imu
     from modelgen.navigator.navigator import prepare
     from modelgen.navigator.spec import navigator_spec
 
-    out_json = None
-    if "--json" in arguments:
-        i = arguments.index("--json")
-        out_json = arguments[i + 1]
-        arguments = arguments[:i] + arguments[i + 2:]
     shipped = load_config(arguments[0] if arguments else builtin_config_path())
-    # stage 4 measures from the filter of stages 1-3: the keys it sets at their values before it
-    config = dataclasses.replace(shipped, **STAGE4_FROM)
+    config = ml.with_parameters(dataclasses.replace(shipped, **STAGE4_FROM),
+                                {"noise.gyro_white.factor": STAGE1_WHITE_FACTOR})
     inputs = prepare(config, read_imu(config.imu_source, config.gap_factor, config.gap_action),
                      read_gnss(config.gnss_source))
-    spec = navigator_spec(model_path(config.model, config.path))
+    return shipped, config, inputs, navigator_spec(model_path(config.model, config.path))
+
+
+def correlation(arguments: list[str]) -> None:
+    """Stage 4: correlation factors from the innovations with GNSS present, the tuned numbers, NIS after."""
+    import json
+
+    from modelgen.navigator import tuning
+    out_json, arguments = _json_option(arguments)
+    shipped, config, inputs, spec = _stage_start(arguments)
     result = tuning.correlation_tuning(config, inputs, spec)
     print(tuning.format_result(result))
     fields = {"gnss.position_variance_factor": "gnss_position_variance_factor",
@@ -182,10 +204,57 @@ def correlation(arguments: list[str]) -> None:
         print(f"written {out_json}")
 
 
+def likelihood(arguments: list[str]) -> None:
+    """Stage 5: the white-noise factor at the maximum of the innovations' likelihood with GNSS present."""
+    import json
+    import time
+
+    from modelgen.navigator import likelihood as ml
+    from modelgen.navigator import tuning
+    out_json, arguments = _json_option(arguments)
+    keys = ml.PROCESS_NOISE
+    if "--all" in arguments:  # every parameter (see modelgen.navigator.likelihood: not what stage 5 sets)
+        arguments.remove("--all")
+        keys = ml.PARAMETERS
+    if "--three" in arguments:  # the white-noise factor and both bias driving noises
+        arguments.remove("--three")
+        keys = ml.PARAMETERS[:3]
+    shipped, stage4_from, inputs, spec = _stage_start(arguments)
+    config = ml.with_parameters(stage4_from, {key: ml.parameter_value(shipped, key)
+                                              for key in ml.PARAMETERS if key not in ml.PROCESS_NOISE})
+    started = time.time()
+
+    def progress(flights: int, total: float, values: dict[str, float]) -> None:
+        print(f"  flight {flights:3d} ({time.time() - started:6.0f} s): log L {total:10.1f}  "
+              + " ".join(f"{k.split('.')[-2] if k.startswith('noise.') else k}={v:.4g}" for k, v in values.items()),
+              flush=True)
+
+    print(f"stage 5: {config.path} ({spec.name}), GNSS present everywhere, no outage flown: maximum likelihood of "
+          "the innovations over " + ", ".join(keys))
+    estimate = ml.maximum_likelihood(config, ml.gnss_present_innovations(inputs, spec), keys, progress=progress)
+    print(f"{estimate.flights} flights, converged: {estimate.converged} ({estimate.message})")
+    print(f"log L {estimate.log_likelihood_before['total']:.1f} -> {estimate.log_likelihood_after['total']:.1f}")
+    for key in keys:
+        print(f"  {key}: {estimate.before[key]:.4g} -> {estimate.after[key]:.4g}")
+    sources, _ = tuning.record_innovations(ml.with_parameters(config, estimate.after), inputs, spec)
+    nis = [dataclasses.asdict(c) for c in tuning.consistency(sources)]
+    print("NIS at the estimate (chi-square: mean = rows, 95 % inside):")
+    for c in nis:
+        print(f"  {c['source']:8} rows {c['rows']}  updates {c['updates']:5d}  mean {c['mean']:7.2f}  "
+              f"median {c['median']:6.2f}  inside 95 % {100 * c['inside_95']:5.1f} %")
+    if out_json:
+        result = {"configuration": Path(str(config.path)).name, "model": spec.name, **dataclasses.asdict(estimate),
+                  "nis_after": nis}
+        Path(out_json).write_text(json.dumps(result, indent=2) + "\n")
+        print(f"written {out_json}")
+
+
 if __name__ == "__main__":
     if sys.argv[1:] == ["--stage3"]:
         stage3()
     elif sys.argv[1:2] == ["--correlation"]:
         correlation(sys.argv[2:])
+    elif sys.argv[1:2] == ["--likelihood"]:
+        likelihood(sys.argv[2:])
     else:
         main()

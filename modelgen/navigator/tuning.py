@@ -309,25 +309,3 @@ def format_result(result: dict) -> str:
     lines.append("correlation factors of the tuned flight (stated, not applied):")
     lines.append("  " + "; ".join(f"{s['source']} {s['label']} {s['factor']:.1f}" for s in result["rows_after"]))
     return "\n".join(lines)
-
-
-def log_likelihood(sources: dict[str, Innovations]) -> dict[str, float]:
-    """The innovations' Gaussian log-likelihood per sensor and in total: -1/2 sum(log det 2 pi S + nu^T S^-1 nu)."""
-    out = {}
-    for name, entry in sources.items():
-        total = 0.0
-        for S, nis in zip(entry.S, entry.nis):
-            sign, logdet = np.linalg.slogdet(2.0 * math.pi * S)
-            total += -0.5 * (logdet + nis)
-        out[name] = total
-    out["total"] = float(sum(out.values()))
-    return out
-
-
-def with_noise_factors(config: NavigatorConfig, factors: dict[str, float]) -> NavigatorConfig:
-    """The configuration with the named noise densities' factors replaced (the SI value follows)."""
-    noise = dict(config.noise)
-    for kind, factor in factors.items():
-        entry = noise[kind]
-        noise[kind] = dataclasses.replace(entry, factor=factor, si=entry.si / entry.factor * factor)
-    return dataclasses.replace(config, noise=noise)

@@ -11,9 +11,17 @@ a model file selects one with ``navigation.mechanization`` (default
 Implemented: ``local_level`` (NED or ENU axes, geodetic position;
 :mod:`~modelgen.model.mechanizations.local_level`) and ``ecef`` (e-frame
 position, velocity and attitude, WGS-84 J2 gravity;
-:mod:`~modelgen.model.mechanizations.ecef`).  Adding one: a module
+:mod:`~modelgen.model.mechanizations.ecef`) and ``wander_azimuth`` (a local-level frame turned
+by the wander angle, free wander: no vertical transport rate, valid through the poles;
+:mod:`~modelgen.model.mechanizations.wander_azimuth`).  Adding one: a module
 here with a class that satisfies :class:`Mechanization`, registered in
 :data:`MECHANIZATIONS` (README, "How to add ... a mechanization").
+
+Two hooks are optional: ``earth_function_rules(position, earth)``, the mechanization's own Earth
+functions and their derivatives as parameters and formulas (ecef: |r^e|; wander azimuth: its curvatures),
+and ``declared_products(factors, position)``, which forms F, G, H of the declared errors from the
+factors of the change of variables itself (wander azimuth: at its chart's origin, reduced modulo the
+ellipsoid's relations so that K^-1 K = I cancels without a gcd).
 """
 
 from __future__ import annotations
@@ -23,9 +31,10 @@ from typing import Callable, Protocol
 import sympy as sp
 
 from modelgen.errors import ModelError
-from modelgen.model.mechanizations import ecef
+from modelgen.model.mechanizations import ecef, wander_azimuth
 from modelgen.model.mechanizations.ecef import Ecef
 from modelgen.model.mechanizations.local_level import LocalLevel
+from modelgen.model.mechanizations.wander_azimuth import WanderAzimuth
 
 #: The engine's navigation state (modelgen.model.perturbation), named as text: the engine imports this package.
 NavigationState = "modelgen.model.perturbation.problem.NavigationState"
@@ -54,7 +63,7 @@ class Mechanization(Protocol):
     def gravity(self, state: "NavigationState") -> sp.Matrix:
         """g at the state's position."""
 
-    def error_frame_angle(self, latitude: sp.Expr, position_error: sp.Matrix) -> sp.Matrix:
+    def error_frame_angle(self, position: sp.Matrix, position_error: sp.Matrix) -> sp.Matrix:
         """d(theta) between the true and the computed navigation frames for a position error (psi-angle, computed-frame velocity)."""
 
     def metres(self, position: sp.Matrix) -> sp.Matrix:
@@ -66,12 +75,14 @@ class Mechanization(Protocol):
 
 #: Mechanizations by the name a model file gives in ``navigation.mechanization``: each makes its
 #: mechanization from (frame, Earth-rate symbol, written velocity equation, written position equation).
-MECHANIZATIONS: dict[str, Callable[..., Mechanization]] = {"local_level": LocalLevel, "ecef": Ecef}
+MECHANIZATIONS: dict[str, Callable[..., Mechanization]] = {"local_level": LocalLevel, "ecef": Ecef, "wander_azimuth": WanderAzimuth}
 #: The navigation frames (a model file's ``frame``) each mechanization resolves its vectors in.
-MECHANIZATION_FRAMES: dict[str, tuple[str, ...]] = {"local_level": ("NED", "ENU"), "ecef": ("ECEF",)}
+MECHANIZATION_FRAMES: dict[str, tuple[str, ...]] = {
+    "local_level": ("NED", "ENU"), "ecef": ("ECEF",), "wander_azimuth": (wander_azimuth.FRAME,),
+}
 #: Error forms each mechanization has (None: every form of the engine).
 MECHANIZATION_ERROR_FORMS: dict[str, dict[str, tuple[str, ...]] | None] = {
-    "local_level": None, "ecef": ecef.ERROR_FORMS,
+    "local_level": None, "ecef": ecef.ERROR_FORMS, "wander_azimuth": wander_azimuth.ERROR_FORMS,
 }
 #: Approximations that mean something only in a local-level frame (latitude, radii of curvature, a vertical axis).
 LOCAL_LEVEL_APPROXIMATIONS = frozenset({
@@ -80,7 +91,9 @@ LOCAL_LEVEL_APPROXIMATIONS = frozenset({
     "no_earth_rate_position_terms", "no_transport_rate_position_terms", "constant_gravity",
 })
 #: Approximations each mechanization accepts (None: all of the engine's).
-MECHANIZATION_APPROXIMATIONS: dict[str, frozenset[str] | None] = {"local_level": None, "ecef": frozenset({"no_gravity_gradient"})}
+MECHANIZATION_APPROXIMATIONS: dict[str, frozenset[str] | None] = {
+    "local_level": None, "ecef": frozenset({"no_gravity_gradient"}), "wander_azimuth": frozenset(),
+}
 
 
 def mechanization_named(name: str, where: str = "navigation.mechanization") -> Callable[..., Mechanization]:

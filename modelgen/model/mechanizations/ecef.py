@@ -99,7 +99,7 @@ class Ecef:
             return self.position_equation(state, self)
         return state.velocity
 
-    def error_frame_angle(self, latitude: sp.Expr, position_error: sp.Matrix) -> sp.Matrix:
+    def error_frame_angle(self, position: sp.Matrix, position_error: sp.Matrix) -> sp.Matrix:
         """0: the e-frame is the same at the true and the computed position."""
         return sp.zeros(3, 1)
 
@@ -111,8 +111,9 @@ class Ecef:
         """I (see :meth:`metres`)."""
         return sp.eye(3)
 
-    def earth_function_rules(self, position: sp.Matrix, radius: sp.Symbol) -> dict:
-        """|r^e| and its partial derivatives in the parameter ``radius``: d|r|/dx = x/|r| (for the engine's last step)."""
+    def earth_function_rules(self, position: sp.Matrix, earth: Any) -> dict:
+        """|r^e| and its partial derivatives in the parameter ``earth.geocentric_radius``: d|r|/dx = x/|r| (for the engine's last step)."""
+        radius = earth.geocentric_radius
         x, y, z = position
         function = GeocentricRadius(x, y, z)
         return {**{sp.Derivative(function, c): c / radius for c in (x, y, z)}, function: radius}

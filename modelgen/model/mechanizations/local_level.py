@@ -148,9 +148,9 @@ class LocalLevel:
         coriolis = (2 * self.earth_rate(state) + self.transport_rate(state)).cross(state.velocity)
         return state.specific_force - coriolis + gravity_vector(self.frame, state.position)
 
-    def error_frame_angle(self, latitude: sp.Expr, position_error: sp.Matrix) -> sp.Matrix:
+    def error_frame_angle(self, position: sp.Matrix, position_error: sp.Matrix) -> sp.Matrix:
         """d(theta): the small angle between the true and the computed local-level frames for a geodetic position error."""
-        return position_angle_rates(self.frame, latitude, position_error[0], position_error[1])
+        return position_angle_rates(self.frame, position[0], position_error[0], position_error[1])
 
     def metres(self, position: sp.Matrix) -> sp.Matrix:
         """M with (navigation-frame metres) = M (dL, dlambda, dh) at ``position``."""

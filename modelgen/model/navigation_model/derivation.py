@@ -76,6 +76,7 @@ def derive_navigation_model(data: Mapping[str, Any], lines: Mapping[str, str], f
             f"vectors in {' or '.join(MECHANIZATION_FRAMES[mechanization])} (frame: {MECHANIZATION_FRAMES[mechanization][0]})"
         )
     _refuse_polar_scenario(read, data, lines, filename, mechanization)
+    _refuse_non_unit_wander_axis(read, data, lines, filename, mechanization)
     decl = Declarations(states=[], noises=[], parameters={})
     own = read_user_parameters(read, data, decl, frame)
     nav = read_navigation_state(read, section, frame, decl)
@@ -132,8 +133,27 @@ def _refuse_polar_scenario(read: SectionReader, data: Mapping, lines: Mapping[st
         f"{read.at('check.parameters.latitude')}: check.parameters.latitude {math.degrees(latitude):.6g} deg is within "
         f"{90 - POLAR_LIMIT_DEG:g} deg of a pole: the local-level mechanization divides by cos(latitude) (longitude rate "
         f"1/cos L = {1 / math.cos(latitude):.0f}, transport rate tan L) and is refused beyond {POLAR_LIMIT_DEG:g} deg; "
-        f"use 'mechanization: ecef' (no singularity at the poles)"
+        f"use 'mechanization: wander_azimuth' or 'mechanization: ecef' (no singularity at the poles)"
     )
+
+
+def _refuse_non_unit_wander_axis(read: SectionReader, data: Mapping, lines: Mapping[str, str], filename: str, mechanization: str) -> None:
+    """A wander_azimuth check scenario's C_e^w column (wander_dcm_13, _23, _33) must be a unit vector: the derived
+    matrices use |k| = 1 (and k_x^2 + k_y^2 = cos^2 L), so other values would evaluate them off the ellipsoid."""
+    from modelgen.model.check_scenario import parse_check_section
+    from modelgen.model.mechanizations.wander_azimuth import AXIS_NAMES
+
+    if mechanization != "wander_azimuth" or not isinstance(data.get("check"), Mapping):
+        return
+    values = parse_check_section(data["check"], lines, filename).get("parameters", {})
+    if not all(name in values for name in AXIS_NAMES):
+        return
+    norm = math.sqrt(sum(float(values[name]) ** 2 for name in AXIS_NAMES))
+    if abs(norm - 1) > 1e-9:
+        raise ModelError(
+            f"{read.at('check.parameters.' + AXIS_NAMES[0])}: check.parameters {', '.join(AXIS_NAMES)} have length {norm:.9g}: "
+            f"they are C_e^w's third column (cos a cos L, sin a cos L, -sin L), a unit vector"
+        )
 
 
 def _refuse_measurements_of_removed_states(read: SectionReader, equations: ErrorEquations, functions: Sequence[MeasurementFunction]) -> None:

@@ -183,6 +183,18 @@ def _kinematic_measurement(
             at = state.position if state.lever_arm_position is None else state.lever_arm_position
             return state.position + mech.metres_inverse(at) * (state.attitude * arm)
 
+        if mechanization == "wander_azimuth":  # metres along the computed wander axes (the chart has no geodetic form)
+            if form == "geodetic":
+                raise ModelError(f"{read.at(f'{key}.form')}: {key}: the wander_azimuth position has no latitude and longitude (form: metres, along the wander axes)")
+
+            def wander_position(state: NavigationState, computed: NavigationState, mech: Mechanization) -> sp.Matrix:
+                antenna = mech.displacement(state, computed)
+                if arm is not None:  # the lever arm C l of the state, resolved in the computed wander axes
+                    antenna = antenna + mech.to_computed_axes(state, computed, state.attitude * arm)
+                return _reorder(antenna, index, sign)
+
+            return wander_position, None, ["m"] * len(index), len(index), None
+
         if mechanization == "ecef":  # the position is already in metres along the e-frame axes
             if form == "geodetic":
                 raise ModelError(f"{read.at(f'{key}.form')}: {key}: the ecef mechanization's position is r^e in metres (form: metres), not geodetic")
@@ -195,13 +207,18 @@ def _kinematic_measurement(
         scale = lambda computed: sp.Matrix([[sign[k] * v for v in metres_matrix(frame, computed.position).row(index[k])] for k in range(len(index))])  # noqa: E731
         return function, scale, ["m"] * len(index), len(index), None
 
+    wander = mechanization == "wander_azimuth"
+
     def velocity(state: NavigationState, computed: NavigationState, mech: Mechanization) -> sp.Matrix:
         if arm is None:
-            return _reorder(state.velocity, index, sign)
-        if computed.body_rate is None:
-            raise ModelError(f"{read.at(key)}: a lever arm on a velocity measurement needs the body rate")
-        rate = state.body_rate if state.body_rate is not None else computed.body_rate
-        antenna = state.velocity + state.attitude * rate.cross(arm) - mech.earth_rate(state).cross(state.attitude * arm)
+            antenna = state.velocity
+        else:
+            if computed.body_rate is None:
+                raise ModelError(f"{read.at(key)}: a lever arm on a velocity measurement needs the body rate")
+            rate = state.body_rate if state.body_rate is not None else computed.body_rate
+            antenna = state.velocity + state.attitude * rate.cross(arm) - mech.earth_rate(state).cross(state.attitude * arm)
+        if wander:  # resolved in the computed wander axes, as the INS resolves the GNSS velocity
+            antenna = mech.to_computed_axes(state, computed, antenna)
         return _reorder(antenna, index, sign)
 
     return velocity, None, ["m/s"] * len(index), len(index), None

@@ -16,6 +16,7 @@ import sympy as sp
 from modelgen.errors import ModelError
 from modelgen.model import wgs84
 from modelgen.model.declaration import Parameter, check_identifier
+from modelgen.model.mechanizations import wander_azimuth
 from modelgen.model.mechanizations.local_level import EarthSymbols
 from modelgen.model.navigation_model.section import (
     Declarations,
@@ -32,7 +33,7 @@ from modelgen.model.units import declared_value
 def read_navigation_state(read: SectionReader, section: Mapping, frame: str, decl: Declarations) -> dict[str, Any]:
     """Symbols of the computed attitude, velocity, position, sensed inputs and Earth quantities."""
     axes_words = axis_words(frame, None)
-    ecef = frame == "ECEF"
+    ecef, wander = frame == "ECEF", frame == wander_azimuth.FRAME
     attitude = read.mapping(section.get("attitude", {}), "navigation.attitude", ("symbols",))
     c = read.names(attitude["symbols"], "navigation.attitude.symbols", 9) if "symbols" in attitude else [f"c{i}{j}" for i in range(1, 4) for j in range(1, 4)]
     for k, s in enumerate(c):
@@ -40,17 +41,24 @@ def read_navigation_state(read: SectionReader, section: Mapping, frame: str, dec
     velocity = read.mapping(section.get("velocity", {}), "navigation.velocity", ("symbols", "symbol"))
     v = vector_symbols(read, velocity, "navigation.velocity", "v", frame, None)
     for s, word in zip(v, axes_words):
-        offer(decl, s, f"velocity_{word}", "m/s", f"e-frame velocity {word} (with respect to the Earth)" if ecef else f"{word} ground speed")
+        offer(decl, s, f"velocity_{word}", "m/s", f"e-frame velocity {word} (with respect to the Earth)" if ecef
+              else f"ground speed along wander axis {word}" if wander else f"{word} ground speed")
     position = read.mapping(section.get("position", {}), "navigation.position", ("symbols",))
-    default_position = ["r_x", "r_y", "r_z"] if ecef else ["L", "lambda_", "h"]
-    p = read.names(position["symbols"], "navigation.position.symbols", 3) if "symbols" in position else default_position
-    if ecef:
-        position_words = [("position_x", "m", "e-frame position x (Earth's centre to the IMU)"), ("position_y", "m", "e-frame position y"),
-                          ("position_z", "m", "e-frame position z (along the Earth's rotation axis)")]
+    if wander:  # C_e^w's third column (the Earth's axis in w axes) and the height; the engine perturbs a chart about it
+        p = read.names(position["symbols"], "navigation.position.symbols", 1) if "symbols" in position else ["h"]
+        for s, name, axis in zip(wander_azimuth.AXIS_SYMBOLS, wander_azimuth.AXIS_NAMES, "xyz"):
+            offer(decl, s, name, "1", f"C_e^w row {axis} col 3: the Earth's rotation axis along wander axis {axis} (z: -sin L)")
+        offer(decl, p[0], "height", "m", "height above the ellipsoid")
     else:
-        position_words = [("latitude", "rad", "geodetic latitude"), ("longitude", "rad", "longitude"), ("height", "m", "height above the ellipsoid")]
-    for s, (name, unit, text) in zip(p, position_words):
-        offer(decl, s, name, unit, text)
+        default_position = ["r_x", "r_y", "r_z"] if ecef else ["L", "lambda_", "h"]
+        p = read.names(position["symbols"], "navigation.position.symbols", 3) if "symbols" in position else default_position
+        if ecef:
+            position_words = [("position_x", "m", "e-frame position x (Earth's centre to the IMU)"), ("position_y", "m", "e-frame position y"),
+                              ("position_z", "m", "e-frame position z (along the Earth's rotation axis)")]
+        else:
+            position_words = [("latitude", "rad", "geodetic latitude"), ("longitude", "rad", "longitude"), ("height", "m", "height above the ellipsoid")]
+        for s, (name, unit, text) in zip(p, position_words):
+            offer(decl, s, name, unit, text)
     force = read.mapping(section.get("specific_force", {}), "navigation.specific_force", ("symbols", "symbol", "axes"))
     force_axes = read.choice(force.get("axes", "body"), "navigation.specific_force.axes", ("body", "navigation"))
     f = vector_symbols(read, force, "navigation.specific_force", "f_b" if force_axes == "body" else "f", frame, "body" if force_axes == "body" else None)
@@ -79,7 +87,7 @@ def read_navigation_state(read: SectionReader, section: Mapping, frame: str, dec
     return {
         "attitude": sp.Matrix(3, 3, [S(s) for s in c]),
         "velocity": symbol_matrix(v),
-        "position": symbol_matrix(p),
+        "position": wander_azimuth.chart_position(S(p[0])) if wander else symbol_matrix(p),
         "specific_force": symbol_matrix(f),
         "specific_force_axes": force_axes,
         "body_rate": symbol_matrix(w),

@@ -83,7 +83,7 @@ class SectionReader:
 
 
 #: Axis suffixes of the navigation frames the general vector notation does not know (modelgen.model.vectors: NED, ENU).
-_NAVIGATION_ONLY_FRAMES = {"ECEF": ("x", "y", "z")}
+_NAVIGATION_ONLY_FRAMES = {"ECEF": ("x", "y", "z"), "WANDER": ("x", "y", "z")}
 
 
 def component_names(name: str, shape: int, frame: str, axes: str | None = None, where: str = "") -> list[str]:

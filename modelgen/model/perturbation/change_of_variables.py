@@ -25,13 +25,12 @@ from modelgen.model.perturbation.problem import (
 
 def _change_of_variables(problem: NavigationProblem) -> tuple[sp.Matrix, sp.Matrix]:
     """(T, T^-1) with declared = T primitive, as Jacobians of the forward and inverse maps."""
-    phi, dv, dp = primitive_symbols()
+    phi, dv, dp = primitive_symbols(problem.position.rows)
     e = problem.errors
     others = [s for s in problem.state_order if s not in declared_navigation_states(problem)]
     mech = problem.mechanization()
     M = mech.metres(problem.position)
-    L = problem.position[0]
-    theta = lambda d: mech.error_frame_angle(L, d)  # noqa: E731  d(theta) of a position error
+    theta = lambda d: mech.error_frame_angle(problem.position, d)  # noqa: E731  d(theta) of a position error
     # forward: declared errors from primitive ones
     position = M * dp if e.position == "metres" else dp
     C = problem.attitude
@@ -80,4 +79,9 @@ def declared_stage(problem: NavigationProblem, primitive: Stage) -> Stage:
     if T == sp.eye(T.rows):
         return primitive
     T_dot = _time_derivative(T, problem)
-    return Stage((T * primitive.F + T_dot) * T_inv, T * primitive.G, primitive.H * T_inv)
+    mech = problem.mechanization()
+    if not hasattr(mech, "declared_products"):
+        return Stage((T * primitive.F + T_dot) * T_inv, T * primitive.G, primitive.H * T_inv)
+    # a mechanization whose position is a chart about the operating point (wander azimuth): the products there,
+    # reduced exactly (its K^-1 K = I: polynomials in 1/det K, reduced by (1/det K) det K = 1 and the ellipsoid's relations)
+    return Stage(*mech.declared_products((T, T_dot, T_inv, primitive.F, primitive.G, primitive.H), problem.position))

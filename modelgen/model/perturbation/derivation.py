@@ -83,6 +83,7 @@ def derive_error_equations(problem: NavigationProblem) -> ErrorEquations:
     """
     check_problem(problem)
     problem, placeholders = _with_vertical_placeholders(problem)
+    problem, frame_angle = _with_frame_angle_placeholder(problem)
     equation_flags: set[str] = set()
     stage = declared_stage(problem, primitive_stage(problem, equation_flags))
     finished = finish(stage, problem)
@@ -103,6 +104,8 @@ def derive_error_equations(problem: NavigationProblem) -> ErrorEquations:
         neglected.extend(found)
         readable.extend(readable_term(getattr(before, t.matrix)[t.row, t.column] - getattr(stage, t.matrix)[t.row, t.column], problem) for t in found)
         finished = after
+    if frame_angle:
+        _refuse_frame_angle_dependence(finished, problem, frame_angle[0])
     return _without_states(
         ErrorEquations(
             F=finished.F,
@@ -114,8 +117,43 @@ def derive_error_equations(problem: NavigationProblem) -> ErrorEquations:
             neglected=tuple(neglected),
             readable=tuple(readable),
         ),
-        placeholders,
+        (*placeholders, *frame_angle),
     )
+
+
+def _with_frame_angle_placeholder(problem: NavigationProblem) -> tuple[NavigationProblem, tuple[sp.Symbol, ...]]:
+    """A position with one more coordinate than its error (wander azimuth's chart: the frame's turn about the
+    vertical, the wander-angle error with the longitude error) gets that frame angle as a placeholder state,
+    after the position states; it is removed at the end (:func:`_refuse_frame_angle_dependence` first)."""
+    e = problem.errors
+    if problem.position.rows == len(e.position_states):
+        return problem, ()
+    angle = sp.Dummy("vertical_frame_angle_error", real=True)
+    errors = replace(e, position_states=(*e.position_states, angle))
+    order: list[sp.Symbol] = []
+    for s in problem.state_order:
+        order.append(s)
+        if s == e.position_states[-1]:
+            order.append(angle)
+    return replace(problem, errors=errors, state_order=tuple(order)), (angle,)
+
+
+def _refuse_frame_angle_dependence(equations: Stage, problem: NavigationProblem, angle: sp.Symbol) -> None:
+    """The declared errors' rates and the measurements must not depend on the placeholder frame angle.
+
+    The psi-angle, computed-frame velocity and metres position errors of the wander frame do not (their
+    equations need no true wander angle: Benson 1975, Scherzinger & Reid 1994); anything else would be
+    a derivation error, refused rather than dropped.
+    """
+    column = list(problem.state_order).index(angle)
+    rows = [i for i in range(equations.F.rows) if i != column and equations.F[i, column] != 0]
+    measured = [i for i in range(equations.H.rows) if equations.H[i, column] != 0]
+    if rows or measured:
+        names = [str(problem.state_order[i]) for i in rows] + [f"measurement row {i}" for i in measured]
+        raise ModelError(
+            f"the {problem.mechanization_name} error model depends on the frame angle about the vertical, which has no "
+            f"error state ({', '.join(names)}): use the psi-angle, computed-frame velocity and metres position errors"
+        )
 
 
 def _with_vertical_placeholders(problem: NavigationProblem) -> tuple[NavigationProblem, tuple[sp.Symbol, ...]]:

@@ -17,6 +17,7 @@ import sympy as sp
 
 from modelgen.model.mechanizations.ecef import GeocentricRadius
 from modelgen.model.mechanizations.local_level import Gravity, MeridianRadius, PrimeVerticalRadius, _vector, skew
+from modelgen.model.mechanizations.wander_azimuth import EARTH_FUNCTIONS as WANDER_EARTH_FUNCTIONS
 from modelgen.model.perturbation.problem import (
     Mechanization,
     NavigationProblem,
@@ -27,9 +28,9 @@ from modelgen.model.perturbation.problem import (
 )
 
 def _make_primitive_symbols() -> tuple[sp.Matrix, sp.Matrix, sp.Matrix]:
-    """phi, dv, dp: the primitive errors (attitude, velocity, geodetic position)."""
-    make = lambda prefix: _vector(sp.symbols(f"{prefix}0:3", real=True, cls=sp.Dummy))  # noqa: E731
-    return make("primitive_phi"), make("primitive_dv"), make("primitive_dp")
+    """phi, dv, dp: the primitive errors (attitude, velocity, position coordinates: 3, or 4 for wander azimuth's chart)."""
+    make = lambda prefix, n=3: _vector(sp.symbols(f"{prefix}0:{n}", real=True, cls=sp.Dummy))  # noqa: E731
+    return make("primitive_phi"), make("primitive_dv"), make("primitive_dp", 4)
 
 
 def _states(problem: NavigationProblem, approximations: set[str]) -> tuple[NavigationState, NavigationState, dict]:
@@ -44,7 +45,7 @@ def _states(problem: NavigationProblem, approximations: set[str]) -> tuple[Navig
     """
     phi, _, _ = primitive_symbols()
     true_v = _vector(sp.symbols("true_v0:3", real=True, cls=sp.Dummy))
-    true_p = _vector(sp.symbols("true_p0:3", real=True, cls=sp.Dummy))
+    true_p = _vector(_TRUE_POSITION[: problem.position.rows])
     C = problem.attitude
     body_input = problem.specific_force if problem.specific_force_axes == "body" else None
     force_error = problem.accelerometer.error(body_input, "accelerometer")
@@ -63,16 +64,18 @@ def _states(problem: NavigationProblem, approximations: set[str]) -> tuple[Navig
 
 #: The primitive error symbols, one set for the module, so that every stage of a derivation shares them.
 _PRIMITIVES = _make_primitive_symbols()
+_TRUE_POSITION = sp.symbols("true_p0:4", real=True, cls=sp.Dummy)
 
 
-def primitive_symbols() -> tuple[sp.Matrix, sp.Matrix, sp.Matrix]:
-    """phi, dv, dp of this module (:data:`_PRIMITIVES`)."""
-    return _PRIMITIVES
+def primitive_symbols(position_size: int = 3) -> tuple[sp.Matrix, sp.Matrix, sp.Matrix]:
+    """phi, dv, dp of this module (:data:`_PRIMITIVES`), dp with one entry per position coordinate."""
+    phi, dv, dp = _PRIMITIVES
+    return phi, dv, dp[:position_size, :]
 
 
 def primitive_stage(problem: NavigationProblem, equation_approximations: set[str]) -> Stage:
     """F_0, G_0, H_0 over (phi, dv, dp, other declared states) at zero error (steps 1-2)."""
-    phi, dv, dp = primitive_symbols()
+    phi, dv, dp = primitive_symbols(problem.position.rows)
     mech = problem.mechanization()
     computed, true, true_symbols = _states(problem, equation_approximations)
     w_in_c = mech.navigation_rate(computed)
@@ -89,7 +92,7 @@ def primitive_stage(problem: NavigationProblem, equation_approximations: set[str
     by = [*phi, *true_symbols["v"], *true_symbols["p"], *others]
     zero = {s: 0 for s in (*phi, *others, *problem.noises)}
     # d/d(dv) = -d/d(v_t) because v_t = v - dv (and the same for position).
-    sign = sp.diag(*([1] * 3 + [-1] * 6 + [1] * len(others)))
+    sign = sp.diag(*([1] * 3 + [-1] * (3 + problem.position.rows) + [1] * len(others)))
     F0 = _at(_jacobian(rates, by), zero, to_true) * sign
     G0 = _at(rates.jacobian(list(problem.noises)), zero, to_true) if problem.noises else sp.zeros(rates.rows, 0)
     H0 = _measurement_jacobian(problem, mech, computed, true, by, zero, to_true) * sign
@@ -106,7 +109,7 @@ def _jacobian(matrix: sp.Matrix, by: Sequence[sp.Symbol]) -> sp.Matrix:
     """
     variables = set(by)
     applied = sorted(
-        (a for a in matrix.atoms(MeridianRadius, PrimeVerticalRadius, Gravity, GeocentricRadius) if variables & set(a.args)),
+        (a for a in matrix.atoms(MeridianRadius, PrimeVerticalRadius, Gravity, GeocentricRadius, *WANDER_EARTH_FUNCTIONS) if variables & set(a.args)),
         key=sp.default_sort_key,
     )
     stand_in = {a: sp.Dummy(f"earth_{k}", real=True) for k, a in enumerate(applied)}

@@ -61,8 +61,8 @@ def finish(stage: Stage, problem: NavigationProblem) -> Stage:
     """Earth functions to parameters, derivatives to formulas (with (L, h) shown in the Derivative objects), simplified."""
     rules = earth_derivative_rules(problem.position[0], problem.position[2], problem.earth)
     mech = problem.mechanization()
-    if hasattr(mech, "earth_function_rules"):  # the mechanization's own Earth functions (ecef: |r^e|)
-        rules.update(mech.earth_function_rules(problem.position, problem.earth.geocentric_radius))
+    if hasattr(mech, "earth_function_rules"):  # the mechanization's own Earth functions (ecef: |r^e|; wander: its chart)
+        rules.update(mech.earth_function_rules(problem.position, problem.earth))
     derivatives = {k: v for k, v in rules.items() if isinstance(k, sp.Derivative)}
     values = {k: v for k, v in rules.items() if not isinstance(k, sp.Derivative)}
     out = []
