@@ -1186,32 +1186,95 @@ ENU_DOPPLER18_BLOCK void horner_last_into_S(enu_doppler18_discretize_scratch *re
 
 ENU_DOPPLER18_BLOCK void horner_unit_columns(enu_doppler18_discretize_scratch *restrict w)
 {
-    w->S[132] = w->term[1][0]*w->fh[4] + w->term[1][1]*w->fh[15] + w->term[1][2]*w->fh[26];
-    w->S[133] = w->term[1][0]*w->fh[5] + w->term[1][1]*w->fh[16] + w->term[1][2]*w->fh[27];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&w->S[132], pair);
+    }
     w->S[134] = w->term[1][0]*w->fh[6] + w->term[1][1]*w->fh[17] + w->term[1][2]*w->fh[28];
-    w->S[135] = w->term[1][14]*w->fh[4] + w->term[1][15]*w->fh[15] + w->term[1][16]*w->fh[26];
-    w->S[136] = w->term[1][14]*w->fh[5] + w->term[1][15]*w->fh[16] + w->term[1][16]*w->fh[27];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][14], w->term[1][14]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][15], w->term[1][15]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][16], w->term[1][16]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&w->S[135], pair);
+    }
     w->S[137] = w->term[1][14]*w->fh[6] + w->term[1][15]*w->fh[17] + w->term[1][16]*w->fh[28];
-    w->S[138] = w->term[1][28]*w->fh[4] + w->term[1][29]*w->fh[15] + w->term[1][30]*w->fh[26];
-    w->S[139] = w->term[1][28]*w->fh[5] + w->term[1][29]*w->fh[16] + w->term[1][30]*w->fh[27];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][28], w->term[1][28]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][29], w->term[1][29]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][30], w->term[1][30]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&w->S[138], pair);
+    }
     w->S[140] = w->term[1][28]*w->fh[6] + w->term[1][29]*w->fh[17] + w->term[1][30]*w->fh[28];
-    w->S[141] = w->term[1][42]*w->fh[4] + w->term[1][43]*w->fh[15] + w->term[1][44]*w->fh[26];
-    w->S[142] = w->term[1][42]*w->fh[5] + w->term[1][43]*w->fh[16] + w->term[1][44]*w->fh[27];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][42], w->term[1][42]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][43], w->term[1][43]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][44], w->term[1][44]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&w->S[141], pair);
+    }
     w->S[143] = w->term[1][42]*w->fh[6] + w->term[1][43]*w->fh[17] + w->term[1][44]*w->fh[28];
-    w->S[144] = w->term[1][56]*w->fh[4] + w->term[1][57]*w->fh[15] + w->term[1][58]*w->fh[26];
-    w->S[145] = w->term[1][56]*w->fh[5] + w->term[1][57]*w->fh[16] + w->term[1][58]*w->fh[27];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][56], w->term[1][56]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][57], w->term[1][57]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][58], w->term[1][58]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&w->S[144], pair);
+    }
     w->S[146] = w->term[1][56]*w->fh[6] + w->term[1][57]*w->fh[17] + w->term[1][58]*w->fh[28];
-    w->S[147] = w->term[1][70]*w->fh[4] + w->term[1][71]*w->fh[15] + w->term[1][72]*w->fh[26];
-    w->S[148] = w->term[1][70]*w->fh[5] + w->term[1][71]*w->fh[16] + w->term[1][72]*w->fh[27];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][70], w->term[1][70]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][71], w->term[1][71]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][72], w->term[1][72]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&w->S[147], pair);
+    }
     w->S[149] = w->term[1][70]*w->fh[6] + w->term[1][71]*w->fh[17] + w->term[1][72]*w->fh[28];
-    w->S[150] = w->term[1][84]*w->fh[4] + w->term[1][85]*w->fh[15] + w->term[1][86]*w->fh[26];
-    w->S[151] = w->term[1][84]*w->fh[5] + w->term[1][85]*w->fh[16] + w->term[1][86]*w->fh[27];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][84], w->term[1][84]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][85], w->term[1][85]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][86], w->term[1][86]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&w->S[150], pair);
+    }
     w->S[152] = w->term[1][84]*w->fh[6] + w->term[1][85]*w->fh[17] + w->term[1][86]*w->fh[28];
-    w->S[154] = w->term[1][98]*w->fh[4] + w->term[1][99]*w->fh[15] + w->term[1][100]*w->fh[26];
-    w->S[155] = w->term[1][98]*w->fh[5] + w->term[1][99]*w->fh[16] + w->term[1][100]*w->fh[27];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][98], w->term[1][98]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][99], w->term[1][99]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][100], w->term[1][100]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&w->S[154], pair);
+    }
     w->S[156] = w->term[1][98]*w->fh[6] + w->term[1][99]*w->fh[17] + w->term[1][100]*w->fh[28];
-    w->S[157] = w->term[1][112]*w->fh[4] + w->term[1][113]*w->fh[15] + w->term[1][114]*w->fh[26];
-    w->S[158] = w->term[1][112]*w->fh[5] + w->term[1][113]*w->fh[16] + w->term[1][114]*w->fh[27];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][112], w->term[1][112]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][113], w->term[1][113]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][114], w->term[1][114]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&w->S[157], pair);
+    }
     w->S[159] = w->term[1][112]*w->fh[6] + w->term[1][113]*w->fh[17] + w->term[1][114]*w->fh[28];
 }
 
@@ -1349,32 +1412,95 @@ ENU_DOPPLER18_BLOCK void horner_transition(enu_doppler18_transition *restrict t,
     t->Phi[160] = w->fh[70]*w->S[129];
     t->Phi[161] = w->fh[71]*w->S[130];
     t->Phi[162] = w->fh[72]*w->S[131];
-    t->Phi[8] = w->S[0]*w->fh[4] + w->S[1]*w->fh[15] + w->S[2]*w->fh[26];
-    t->Phi[9] = w->S[0]*w->fh[5] + w->S[1]*w->fh[16] + w->S[2]*w->fh[27];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&t->Phi[8], pair);
+    }
     t->Phi[10] = w->S[0]*w->fh[6] + w->S[1]*w->fh[17] + w->S[2]*w->fh[28];
-    t->Phi[25] = w->S[14]*w->fh[4] + w->S[15]*w->fh[15] + w->S[16]*w->fh[26];
-    t->Phi[26] = w->S[14]*w->fh[5] + w->S[15]*w->fh[16] + w->S[16]*w->fh[27];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[14], w->S[14]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[15], w->S[15]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[16], w->S[16]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&t->Phi[25], pair);
+    }
     t->Phi[27] = w->S[14]*w->fh[6] + w->S[15]*w->fh[17] + w->S[16]*w->fh[28];
-    t->Phi[42] = w->S[28]*w->fh[4] + w->S[29]*w->fh[15] + w->S[30]*w->fh[26];
-    t->Phi[43] = w->S[28]*w->fh[5] + w->S[29]*w->fh[16] + w->S[30]*w->fh[27];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[28], w->S[28]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[29], w->S[29]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[30], w->S[30]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&t->Phi[42], pair);
+    }
     t->Phi[44] = w->S[28]*w->fh[6] + w->S[29]*w->fh[17] + w->S[30]*w->fh[28];
-    t->Phi[59] = w->S[42]*w->fh[4] + w->S[43]*w->fh[15] + w->S[44]*w->fh[26];
-    t->Phi[60] = w->S[42]*w->fh[5] + w->S[43]*w->fh[16] + w->S[44]*w->fh[27];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[42], w->S[42]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[43], w->S[43]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[44], w->S[44]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&t->Phi[59], pair);
+    }
     t->Phi[61] = w->S[42]*w->fh[6] + w->S[43]*w->fh[17] + w->S[44]*w->fh[28];
-    t->Phi[76] = w->S[56]*w->fh[4] + w->S[57]*w->fh[15] + w->S[58]*w->fh[26];
-    t->Phi[77] = w->S[56]*w->fh[5] + w->S[57]*w->fh[16] + w->S[58]*w->fh[27];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[56], w->S[56]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[57], w->S[57]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[58], w->S[58]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&t->Phi[76], pair);
+    }
     t->Phi[78] = w->S[56]*w->fh[6] + w->S[57]*w->fh[17] + w->S[58]*w->fh[28];
-    t->Phi[93] = w->S[70]*w->fh[4] + w->S[71]*w->fh[15] + w->S[72]*w->fh[26];
-    t->Phi[94] = w->S[70]*w->fh[5] + w->S[71]*w->fh[16] + w->S[72]*w->fh[27];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[70], w->S[70]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[71], w->S[71]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[72], w->S[72]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&t->Phi[93], pair);
+    }
     t->Phi[95] = w->S[70]*w->fh[6] + w->S[71]*w->fh[17] + w->S[72]*w->fh[28];
-    t->Phi[110] = w->S[84]*w->fh[4] + w->S[85]*w->fh[15] + w->S[86]*w->fh[26];
-    t->Phi[111] = w->S[84]*w->fh[5] + w->S[85]*w->fh[16] + w->S[86]*w->fh[27];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[84], w->S[84]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[85], w->S[85]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[86], w->S[86]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&t->Phi[110], pair);
+    }
     t->Phi[112] = w->S[84]*w->fh[6] + w->S[85]*w->fh[17] + w->S[86]*w->fh[28];
-    t->Phi[128] = w->S[98]*w->fh[4] + w->S[99]*w->fh[15] + w->S[100]*w->fh[26];
-    t->Phi[129] = w->S[98]*w->fh[5] + w->S[99]*w->fh[16] + w->S[100]*w->fh[27];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[98], w->S[98]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[99], w->S[99]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[100], w->S[100]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&t->Phi[128], pair);
+    }
     t->Phi[130] = w->S[98]*w->fh[6] + w->S[99]*w->fh[17] + w->S[100]*w->fh[28];
-    t->Phi[145] = w->S[112]*w->fh[4] + w->S[113]*w->fh[15] + w->S[114]*w->fh[26];
-    t->Phi[146] = w->S[112]*w->fh[5] + w->S[113]*w->fh[16] + w->S[114]*w->fh[27];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[112], w->S[112]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[113], w->S[113]),
+                lane_pair_load(&w->fh[15]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[114], w->S[114]),
+                lane_pair_load(&w->fh[26]));
+        lane_pair_store(&t->Phi[145], pair);
+    }
     t->Phi[147] = w->S[112]*w->fh[6] + w->S[113]*w->fh[17] + w->S[114]*w->fh[28];
     t->Phi[126] = 0;
     t->Phi[154] = one;
@@ -2190,8 +2316,15 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar transition_check(enu_doppler18_transiti
 ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
         enu_doppler18_discretize_scratch *restrict w)
 {
-    w->term[0][0] = w->S[0]*m->G[0] + w->S[1]*m->G[3] + w->S[2]*m->G[6];
-    w->term[0][1] = w->S[0]*m->G[1] + w->S[1]*m->G[4] + w->S[2]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][0], pair);
+    }
     w->term[0][2] = w->S[0]*m->G[2] + w->S[1]*m->G[5] + w->S[2]*m->G[8];
     w->term[0][3] = w->S[8]*m->G[9];
     w->term[0][4] = w->S[9]*m->G[10];
@@ -2199,8 +2332,15 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
     w->term[0][6] = w->S[11]*m->G[12];
     w->term[0][7] = w->S[12]*m->G[13];
     w->term[0][8] = w->S[13]*m->G[14];
-    w->term[0][9] = w->S[14]*m->G[0] + w->S[15]*m->G[3] + w->S[16]*m->G[6];
-    w->term[0][10] = w->S[14]*m->G[1] + w->S[15]*m->G[4] + w->S[16]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[14], w->S[14]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[15], w->S[15]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[16], w->S[16]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][9], pair);
+    }
     w->term[0][11] = w->S[14]*m->G[2] + w->S[15]*m->G[5] + w->S[16]*m->G[8];
     w->term[0][12] = w->S[22]*m->G[9];
     w->term[0][13] = w->S[23]*m->G[10];
@@ -2208,8 +2348,15 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
     w->term[0][15] = w->S[25]*m->G[12];
     w->term[0][16] = w->S[26]*m->G[13];
     w->term[0][17] = w->S[27]*m->G[14];
-    w->term[0][18] = w->S[28]*m->G[0] + w->S[29]*m->G[3] + w->S[30]*m->G[6];
-    w->term[0][19] = w->S[28]*m->G[1] + w->S[29]*m->G[4] + w->S[30]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[28], w->S[28]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[29], w->S[29]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[30], w->S[30]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][18], pair);
+    }
     w->term[0][20] = w->S[28]*m->G[2] + w->S[29]*m->G[5] + w->S[30]*m->G[8];
     w->term[0][21] = w->S[36]*m->G[9];
     w->term[0][22] = w->S[37]*m->G[10];
@@ -2217,8 +2364,15 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
     w->term[0][24] = w->S[39]*m->G[12];
     w->term[0][25] = w->S[40]*m->G[13];
     w->term[0][26] = w->S[41]*m->G[14];
-    w->term[0][27] = w->S[42]*m->G[0] + w->S[43]*m->G[3] + w->S[44]*m->G[6];
-    w->term[0][28] = w->S[42]*m->G[1] + w->S[43]*m->G[4] + w->S[44]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[42], w->S[42]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[43], w->S[43]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[44], w->S[44]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][27], pair);
+    }
     w->term[0][29] = w->S[42]*m->G[2] + w->S[43]*m->G[5] + w->S[44]*m->G[8];
     w->term[0][30] = w->S[50]*m->G[9];
     w->term[0][31] = w->S[51]*m->G[10];
@@ -2226,8 +2380,15 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
     w->term[0][33] = w->S[53]*m->G[12];
     w->term[0][34] = w->S[54]*m->G[13];
     w->term[0][35] = w->S[55]*m->G[14];
-    w->term[0][36] = w->S[56]*m->G[0] + w->S[57]*m->G[3] + w->S[58]*m->G[6];
-    w->term[0][37] = w->S[56]*m->G[1] + w->S[57]*m->G[4] + w->S[58]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[56], w->S[56]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[57], w->S[57]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[58], w->S[58]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][36], pair);
+    }
     w->term[0][38] = w->S[56]*m->G[2] + w->S[57]*m->G[5] + w->S[58]*m->G[8];
     w->term[0][39] = w->S[64]*m->G[9];
     w->term[0][40] = w->S[65]*m->G[10];
@@ -2235,8 +2396,15 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
     w->term[0][42] = w->S[67]*m->G[12];
     w->term[0][43] = w->S[68]*m->G[13];
     w->term[0][44] = w->S[69]*m->G[14];
-    w->term[0][45] = w->S[70]*m->G[0] + w->S[71]*m->G[3] + w->S[72]*m->G[6];
-    w->term[0][46] = w->S[70]*m->G[1] + w->S[71]*m->G[4] + w->S[72]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[70], w->S[70]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[71], w->S[71]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[72], w->S[72]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][45], pair);
+    }
     w->term[0][47] = w->S[70]*m->G[2] + w->S[71]*m->G[5] + w->S[72]*m->G[8];
     w->term[0][48] = w->S[78]*m->G[9];
     w->term[0][49] = w->S[79]*m->G[10];
@@ -2244,8 +2412,15 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
     w->term[0][51] = w->S[81]*m->G[12];
     w->term[0][52] = w->S[82]*m->G[13];
     w->term[0][53] = w->S[83]*m->G[14];
-    w->term[0][54] = w->S[84]*m->G[0] + w->S[85]*m->G[3] + w->S[86]*m->G[6];
-    w->term[0][55] = w->S[84]*m->G[1] + w->S[85]*m->G[4] + w->S[86]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[84], w->S[84]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[85], w->S[85]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[86], w->S[86]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][54], pair);
+    }
     w->term[0][56] = w->S[84]*m->G[2] + w->S[85]*m->G[5] + w->S[86]*m->G[8];
     w->term[0][57] = w->S[92]*m->G[9];
     w->term[0][58] = w->S[93]*m->G[10];
@@ -2253,8 +2428,15 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
     w->term[0][60] = w->S[95]*m->G[12];
     w->term[0][61] = w->S[96]*m->G[13];
     w->term[0][62] = w->S[97]*m->G[14];
-    w->term[0][63] = w->S[98]*m->G[0] + w->S[99]*m->G[3] + w->S[100]*m->G[6];
-    w->term[0][64] = w->S[98]*m->G[1] + w->S[99]*m->G[4] + w->S[100]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[98], w->S[98]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[99], w->S[99]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[100], w->S[100]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][63], pair);
+    }
     w->term[0][65] = w->S[98]*m->G[2] + w->S[99]*m->G[5] + w->S[100]*m->G[8];
     w->term[0][66] = w->S[106]*m->G[9];
     w->term[0][67] = w->S[107]*m->G[10];
@@ -2262,8 +2444,15 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
     w->term[0][69] = w->S[109]*m->G[12];
     w->term[0][70] = w->S[110]*m->G[13];
     w->term[0][71] = w->S[111]*m->G[14];
-    w->term[0][72] = w->S[112]*m->G[0] + w->S[113]*m->G[3] + w->S[114]*m->G[6];
-    w->term[0][73] = w->S[112]*m->G[1] + w->S[113]*m->G[4] + w->S[114]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[112], w->S[112]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[113], w->S[113]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[114], w->S[114]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][72], pair);
+    }
     w->term[0][74] = w->S[112]*m->G[2] + w->S[113]*m->G[5] + w->S[114]*m->G[8];
     w->term[0][75] = w->S[120]*m->G[9];
     w->term[0][76] = w->S[121]*m->G[10];
@@ -2283,14 +2472,22 @@ ENU_DOPPLER18_BLOCK void process_noise(const enu_doppler18_matrices *restrict m,
         enu_doppler18_transition *restrict t, enu_doppler18_discretize_scratch *restrict w, const
         enu_doppler18_scalar T)
 {
-    w->term[1][87] = T*m->q[0];
-    w->term[1][88] = T*m->q[1];
-    w->term[1][89] = T*m->q[2];
-    w->term[1][90] = T*m->q[3];
-    w->term[1][91] = T*m->q[4];
-    w->term[1][92] = T*m->q[5];
-    w->term[1][93] = T*m->q[6];
-    w->term[1][94] = T*m->q[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[0]));
+        lane_pair_store(&w->term[1][87], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[2]));
+        lane_pair_store(&w->term[1][89], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[4]));
+        lane_pair_store(&w->term[1][91], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[6]));
+        lane_pair_store(&w->term[1][93], pair);
+    }
     w->term[1][95] = T*m->q[8];
     w->term[1][0] = w->term[0][0]*w->term[1][87];
     w->term[1][1] = w->term[0][1]*w->term[1][88];
@@ -3351,114 +3548,45 @@ ENU_DOPPLER18_BLOCK void state_predict(const enu_doppler18_filter *restrict f, c
 ENU_DOPPLER18_BLOCK void phi_times_p_row_0(const enu_doppler18_filter *restrict f, const
         enu_doppler18_transition *restrict t, enu_doppler18_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[0]*f->P[0][0] + t->Phi[1]*f->P[1][0] + t->Phi[2]*f->P[2][0] +
-            t->Phi[3]*f->P[3][0] + t->Phi[4]*f->P[4][0] + t->Phi[5]*f->P[5][0] +
-            t->Phi[6]*f->P[6][0] + t->Phi[7]*f->P[8][0] + t->Phi[8]*f->P[9][0] +
-            t->Phi[9]*f->P[10][0] + t->Phi[10]*f->P[11][0] + t->Phi[11]*f->P[12][0] +
-            t->Phi[12]*f->P[13][0] + t->Phi[13]*f->P[14][0] + t->Phi[14]*f->P[15][0] +
-            t->Phi[15]*f->P[16][0] + t->Phi[16]*f->P[17][0];
-    w->M[1] = t->Phi[0]*f->P[0][1] + t->Phi[1]*f->P[1][1] + t->Phi[2]*f->P[2][1] +
-            t->Phi[3]*f->P[3][1] + t->Phi[4]*f->P[4][1] + t->Phi[5]*f->P[5][1] +
-            t->Phi[6]*f->P[6][1] + t->Phi[7]*f->P[8][1] + t->Phi[8]*f->P[9][1] +
-            t->Phi[9]*f->P[10][1] + t->Phi[10]*f->P[11][1] + t->Phi[11]*f->P[12][1] +
-            t->Phi[12]*f->P[13][1] + t->Phi[13]*f->P[14][1] + t->Phi[14]*f->P[15][1] +
-            t->Phi[15]*f->P[16][1] + t->Phi[16]*f->P[17][1];
-    w->M[2] = t->Phi[0]*f->P[0][2] + t->Phi[1]*f->P[1][2] + t->Phi[2]*f->P[2][2] +
-            t->Phi[3]*f->P[3][2] + t->Phi[4]*f->P[4][2] + t->Phi[5]*f->P[5][2] +
-            t->Phi[6]*f->P[6][2] + t->Phi[7]*f->P[8][2] + t->Phi[8]*f->P[9][2] +
-            t->Phi[9]*f->P[10][2] + t->Phi[10]*f->P[11][2] + t->Phi[11]*f->P[12][2] +
-            t->Phi[12]*f->P[13][2] + t->Phi[13]*f->P[14][2] + t->Phi[14]*f->P[15][2] +
-            t->Phi[15]*f->P[16][2] + t->Phi[16]*f->P[17][2];
-    w->M[3] = t->Phi[0]*f->P[0][3] + t->Phi[1]*f->P[1][3] + t->Phi[2]*f->P[2][3] +
-            t->Phi[3]*f->P[3][3] + t->Phi[4]*f->P[4][3] + t->Phi[5]*f->P[5][3] +
-            t->Phi[6]*f->P[6][3] + t->Phi[7]*f->P[8][3] + t->Phi[8]*f->P[9][3] +
-            t->Phi[9]*f->P[10][3] + t->Phi[10]*f->P[11][3] + t->Phi[11]*f->P[12][3] +
-            t->Phi[12]*f->P[13][3] + t->Phi[13]*f->P[14][3] + t->Phi[14]*f->P[15][3] +
-            t->Phi[15]*f->P[16][3] + t->Phi[16]*f->P[17][3];
-    w->M[4] = t->Phi[0]*f->P[0][4] + t->Phi[1]*f->P[1][4] + t->Phi[2]*f->P[2][4] +
-            t->Phi[3]*f->P[3][4] + t->Phi[4]*f->P[4][4] + t->Phi[5]*f->P[5][4] +
-            t->Phi[6]*f->P[6][4] + t->Phi[7]*f->P[8][4] + t->Phi[8]*f->P[9][4] +
-            t->Phi[9]*f->P[10][4] + t->Phi[10]*f->P[11][4] + t->Phi[11]*f->P[12][4] +
-            t->Phi[12]*f->P[13][4] + t->Phi[13]*f->P[14][4] + t->Phi[14]*f->P[15][4] +
-            t->Phi[15]*f->P[16][4] + t->Phi[16]*f->P[17][4];
-    w->M[5] = t->Phi[0]*f->P[0][5] + t->Phi[1]*f->P[1][5] + t->Phi[2]*f->P[2][5] +
-            t->Phi[3]*f->P[3][5] + t->Phi[4]*f->P[4][5] + t->Phi[5]*f->P[5][5] +
-            t->Phi[6]*f->P[6][5] + t->Phi[7]*f->P[8][5] + t->Phi[8]*f->P[9][5] +
-            t->Phi[9]*f->P[10][5] + t->Phi[10]*f->P[11][5] + t->Phi[11]*f->P[12][5] +
-            t->Phi[12]*f->P[13][5] + t->Phi[13]*f->P[14][5] + t->Phi[14]*f->P[15][5] +
-            t->Phi[15]*f->P[16][5] + t->Phi[16]*f->P[17][5];
-    w->M[6] = t->Phi[0]*f->P[0][6] + t->Phi[1]*f->P[1][6] + t->Phi[2]*f->P[2][6] +
-            t->Phi[3]*f->P[3][6] + t->Phi[4]*f->P[4][6] + t->Phi[5]*f->P[5][6] +
-            t->Phi[6]*f->P[6][6] + t->Phi[7]*f->P[8][6] + t->Phi[8]*f->P[9][6] +
-            t->Phi[9]*f->P[10][6] + t->Phi[10]*f->P[11][6] + t->Phi[11]*f->P[12][6] +
-            t->Phi[12]*f->P[13][6] + t->Phi[13]*f->P[14][6] + t->Phi[14]*f->P[15][6] +
-            t->Phi[15]*f->P[16][6] + t->Phi[16]*f->P[17][6];
-    w->M[7] = t->Phi[0]*f->P[0][7] + t->Phi[1]*f->P[1][7] + t->Phi[2]*f->P[2][7] +
-            t->Phi[3]*f->P[3][7] + t->Phi[4]*f->P[4][7] + t->Phi[5]*f->P[5][7] +
-            t->Phi[6]*f->P[6][7] + t->Phi[7]*f->P[8][7] + t->Phi[8]*f->P[9][7] +
-            t->Phi[9]*f->P[10][7] + t->Phi[10]*f->P[11][7] + t->Phi[11]*f->P[12][7] +
-            t->Phi[12]*f->P[13][7] + t->Phi[13]*f->P[14][7] + t->Phi[14]*f->P[15][7] +
-            t->Phi[15]*f->P[16][7] + t->Phi[16]*f->P[17][7];
-    w->M[8] = t->Phi[0]*f->P[0][8] + t->Phi[1]*f->P[1][8] + t->Phi[2]*f->P[2][8] +
-            t->Phi[3]*f->P[3][8] + t->Phi[4]*f->P[4][8] + t->Phi[5]*f->P[5][8] +
-            t->Phi[6]*f->P[6][8] + t->Phi[7]*f->P[8][8] + t->Phi[8]*f->P[9][8] +
-            t->Phi[9]*f->P[10][8] + t->Phi[10]*f->P[11][8] + t->Phi[11]*f->P[12][8] +
-            t->Phi[12]*f->P[13][8] + t->Phi[13]*f->P[14][8] + t->Phi[14]*f->P[15][8] +
-            t->Phi[15]*f->P[16][8] + t->Phi[16]*f->P[17][8];
-    w->M[9] = t->Phi[0]*f->P[0][9] + t->Phi[1]*f->P[1][9] + t->Phi[2]*f->P[2][9] +
-            t->Phi[3]*f->P[3][9] + t->Phi[4]*f->P[4][9] + t->Phi[5]*f->P[5][9] +
-            t->Phi[6]*f->P[6][9] + t->Phi[7]*f->P[8][9] + t->Phi[8]*f->P[9][9] +
-            t->Phi[9]*f->P[10][9] + t->Phi[10]*f->P[11][9] + t->Phi[11]*f->P[12][9] +
-            t->Phi[12]*f->P[13][9] + t->Phi[13]*f->P[14][9] + t->Phi[14]*f->P[15][9] +
-            t->Phi[15]*f->P[16][9] + t->Phi[16]*f->P[17][9];
-    w->M[10] = t->Phi[0]*f->P[0][10] + t->Phi[1]*f->P[1][10] + t->Phi[2]*f->P[2][10] +
-            t->Phi[3]*f->P[3][10] + t->Phi[4]*f->P[4][10] + t->Phi[5]*f->P[5][10] +
-            t->Phi[6]*f->P[6][10] + t->Phi[7]*f->P[8][10] + t->Phi[8]*f->P[9][10] +
-            t->Phi[9]*f->P[10][10] + t->Phi[10]*f->P[11][10] + t->Phi[11]*f->P[12][10] +
-            t->Phi[12]*f->P[13][10] + t->Phi[13]*f->P[14][10] + t->Phi[14]*f->P[15][10] +
-            t->Phi[15]*f->P[16][10] + t->Phi[16]*f->P[17][10];
-    w->M[11] = t->Phi[0]*f->P[0][11] + t->Phi[1]*f->P[1][11] + t->Phi[2]*f->P[2][11] +
-            t->Phi[3]*f->P[3][11] + t->Phi[4]*f->P[4][11] + t->Phi[5]*f->P[5][11] +
-            t->Phi[6]*f->P[6][11] + t->Phi[7]*f->P[8][11] + t->Phi[8]*f->P[9][11] +
-            t->Phi[9]*f->P[10][11] + t->Phi[10]*f->P[11][11] + t->Phi[11]*f->P[12][11] +
-            t->Phi[12]*f->P[13][11] + t->Phi[13]*f->P[14][11] + t->Phi[14]*f->P[15][11] +
-            t->Phi[15]*f->P[16][11] + t->Phi[16]*f->P[17][11];
-    w->M[12] = t->Phi[0]*f->P[0][12] + t->Phi[1]*f->P[1][12] + t->Phi[2]*f->P[2][12] +
-            t->Phi[3]*f->P[3][12] + t->Phi[4]*f->P[4][12] + t->Phi[5]*f->P[5][12] +
-            t->Phi[6]*f->P[6][12] + t->Phi[7]*f->P[8][12] + t->Phi[8]*f->P[9][12] +
-            t->Phi[9]*f->P[10][12] + t->Phi[10]*f->P[11][12] + t->Phi[11]*f->P[12][12] +
-            t->Phi[12]*f->P[13][12] + t->Phi[13]*f->P[14][12] + t->Phi[14]*f->P[15][12] +
-            t->Phi[15]*f->P[16][12] + t->Phi[16]*f->P[17][12];
-    w->M[13] = t->Phi[0]*f->P[0][13] + t->Phi[1]*f->P[1][13] + t->Phi[2]*f->P[2][13] +
-            t->Phi[3]*f->P[3][13] + t->Phi[4]*f->P[4][13] + t->Phi[5]*f->P[5][13] +
-            t->Phi[6]*f->P[6][13] + t->Phi[7]*f->P[8][13] + t->Phi[8]*f->P[9][13] +
-            t->Phi[9]*f->P[10][13] + t->Phi[10]*f->P[11][13] + t->Phi[11]*f->P[12][13] +
-            t->Phi[12]*f->P[13][13] + t->Phi[13]*f->P[14][13] + t->Phi[14]*f->P[15][13] +
-            t->Phi[15]*f->P[16][13] + t->Phi[16]*f->P[17][13];
-    w->M[14] = t->Phi[0]*f->P[0][14] + t->Phi[1]*f->P[1][14] + t->Phi[2]*f->P[2][14] +
-            t->Phi[3]*f->P[3][14] + t->Phi[4]*f->P[4][14] + t->Phi[5]*f->P[5][14] +
-            t->Phi[6]*f->P[6][14] + t->Phi[7]*f->P[8][14] + t->Phi[8]*f->P[9][14] +
-            t->Phi[9]*f->P[10][14] + t->Phi[10]*f->P[11][14] + t->Phi[11]*f->P[12][14] +
-            t->Phi[12]*f->P[13][14] + t->Phi[13]*f->P[14][14] + t->Phi[14]*f->P[15][14] +
-            t->Phi[15]*f->P[16][14] + t->Phi[16]*f->P[17][14];
-    w->M[15] = t->Phi[0]*f->P[0][15] + t->Phi[1]*f->P[1][15] + t->Phi[2]*f->P[2][15] +
-            t->Phi[3]*f->P[3][15] + t->Phi[4]*f->P[4][15] + t->Phi[5]*f->P[5][15] +
-            t->Phi[6]*f->P[6][15] + t->Phi[7]*f->P[8][15] + t->Phi[8]*f->P[9][15] +
-            t->Phi[9]*f->P[10][15] + t->Phi[10]*f->P[11][15] + t->Phi[11]*f->P[12][15] +
-            t->Phi[12]*f->P[13][15] + t->Phi[13]*f->P[14][15] + t->Phi[14]*f->P[15][15] +
-            t->Phi[15]*f->P[16][15] + t->Phi[16]*f->P[17][15];
-    w->M[16] = t->Phi[0]*f->P[0][16] + t->Phi[1]*f->P[1][16] + t->Phi[2]*f->P[2][16] +
-            t->Phi[3]*f->P[3][16] + t->Phi[4]*f->P[4][16] + t->Phi[5]*f->P[5][16] +
-            t->Phi[6]*f->P[6][16] + t->Phi[7]*f->P[8][16] + t->Phi[8]*f->P[9][16] +
-            t->Phi[9]*f->P[10][16] + t->Phi[10]*f->P[11][16] + t->Phi[11]*f->P[12][16] +
-            t->Phi[12]*f->P[13][16] + t->Phi[13]*f->P[14][16] + t->Phi[14]*f->P[15][16] +
-            t->Phi[15]*f->P[16][16] + t->Phi[16]*f->P[17][16];
-    w->M[17] = t->Phi[0]*f->P[0][17] + t->Phi[1]*f->P[1][17] + t->Phi[2]*f->P[2][17] +
-            t->Phi[3]*f->P[3][17] + t->Phi[4]*f->P[4][17] + t->Phi[5]*f->P[5][17] +
-            t->Phi[6]*f->P[6][17] + t->Phi[7]*f->P[8][17] + t->Phi[8]*f->P[9][17] +
-            t->Phi[9]*f->P[10][17] + t->Phi[10]*f->P[11][17] + t->Phi[11]*f->P[12][17] +
-            t->Phi[12]*f->P[13][17] + t->Phi[13]*f->P[14][17] + t->Phi[14]*f->P[15][17] +
-            t->Phi[15]*f->P[16][17] + t->Phi[16]*f->P[17][17];
+    int c;
+    lane_pair b[17];
+    b[0] = lane_pair_of(t->Phi[0], t->Phi[0]);
+    b[1] = lane_pair_of(t->Phi[1], t->Phi[1]);
+    b[2] = lane_pair_of(t->Phi[2], t->Phi[2]);
+    b[3] = lane_pair_of(t->Phi[3], t->Phi[3]);
+    b[4] = lane_pair_of(t->Phi[4], t->Phi[4]);
+    b[5] = lane_pair_of(t->Phi[5], t->Phi[5]);
+    b[6] = lane_pair_of(t->Phi[6], t->Phi[6]);
+    b[7] = lane_pair_of(t->Phi[7], t->Phi[7]);
+    b[8] = lane_pair_of(t->Phi[8], t->Phi[8]);
+    b[9] = lane_pair_of(t->Phi[9], t->Phi[9]);
+    b[10] = lane_pair_of(t->Phi[10], t->Phi[10]);
+    b[11] = lane_pair_of(t->Phi[11], t->Phi[11]);
+    b[12] = lane_pair_of(t->Phi[12], t->Phi[12]);
+    b[13] = lane_pair_of(t->Phi[13], t->Phi[13]);
+    b[14] = lane_pair_of(t->Phi[14], t->Phi[14]);
+    b[15] = lane_pair_of(t->Phi[15], t->Phi[15]);
+    b[16] = lane_pair_of(t->Phi[16], t->Phi[16]);
+    for (c = 0; c + 1 < 18; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[16][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[17][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -3565,114 +3693,45 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar propagate_row_0(const enu_doppler18_tra
 ENU_DOPPLER18_BLOCK void phi_times_p_row_1(const enu_doppler18_filter *restrict f, const
         enu_doppler18_transition *restrict t, enu_doppler18_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[17]*f->P[0][0] + t->Phi[18]*f->P[1][0] + t->Phi[19]*f->P[2][0] +
-            t->Phi[20]*f->P[3][0] + t->Phi[21]*f->P[4][0] + t->Phi[22]*f->P[5][0] +
-            t->Phi[23]*f->P[6][0] + t->Phi[24]*f->P[8][0] + t->Phi[25]*f->P[9][0] +
-            t->Phi[26]*f->P[10][0] + t->Phi[27]*f->P[11][0] + t->Phi[28]*f->P[12][0] +
-            t->Phi[29]*f->P[13][0] + t->Phi[30]*f->P[14][0] + t->Phi[31]*f->P[15][0] +
-            t->Phi[32]*f->P[16][0] + t->Phi[33]*f->P[17][0];
-    w->M[1] = t->Phi[17]*f->P[0][1] + t->Phi[18]*f->P[1][1] + t->Phi[19]*f->P[2][1] +
-            t->Phi[20]*f->P[3][1] + t->Phi[21]*f->P[4][1] + t->Phi[22]*f->P[5][1] +
-            t->Phi[23]*f->P[6][1] + t->Phi[24]*f->P[8][1] + t->Phi[25]*f->P[9][1] +
-            t->Phi[26]*f->P[10][1] + t->Phi[27]*f->P[11][1] + t->Phi[28]*f->P[12][1] +
-            t->Phi[29]*f->P[13][1] + t->Phi[30]*f->P[14][1] + t->Phi[31]*f->P[15][1] +
-            t->Phi[32]*f->P[16][1] + t->Phi[33]*f->P[17][1];
-    w->M[2] = t->Phi[17]*f->P[0][2] + t->Phi[18]*f->P[1][2] + t->Phi[19]*f->P[2][2] +
-            t->Phi[20]*f->P[3][2] + t->Phi[21]*f->P[4][2] + t->Phi[22]*f->P[5][2] +
-            t->Phi[23]*f->P[6][2] + t->Phi[24]*f->P[8][2] + t->Phi[25]*f->P[9][2] +
-            t->Phi[26]*f->P[10][2] + t->Phi[27]*f->P[11][2] + t->Phi[28]*f->P[12][2] +
-            t->Phi[29]*f->P[13][2] + t->Phi[30]*f->P[14][2] + t->Phi[31]*f->P[15][2] +
-            t->Phi[32]*f->P[16][2] + t->Phi[33]*f->P[17][2];
-    w->M[3] = t->Phi[17]*f->P[0][3] + t->Phi[18]*f->P[1][3] + t->Phi[19]*f->P[2][3] +
-            t->Phi[20]*f->P[3][3] + t->Phi[21]*f->P[4][3] + t->Phi[22]*f->P[5][3] +
-            t->Phi[23]*f->P[6][3] + t->Phi[24]*f->P[8][3] + t->Phi[25]*f->P[9][3] +
-            t->Phi[26]*f->P[10][3] + t->Phi[27]*f->P[11][3] + t->Phi[28]*f->P[12][3] +
-            t->Phi[29]*f->P[13][3] + t->Phi[30]*f->P[14][3] + t->Phi[31]*f->P[15][3] +
-            t->Phi[32]*f->P[16][3] + t->Phi[33]*f->P[17][3];
-    w->M[4] = t->Phi[17]*f->P[0][4] + t->Phi[18]*f->P[1][4] + t->Phi[19]*f->P[2][4] +
-            t->Phi[20]*f->P[3][4] + t->Phi[21]*f->P[4][4] + t->Phi[22]*f->P[5][4] +
-            t->Phi[23]*f->P[6][4] + t->Phi[24]*f->P[8][4] + t->Phi[25]*f->P[9][4] +
-            t->Phi[26]*f->P[10][4] + t->Phi[27]*f->P[11][4] + t->Phi[28]*f->P[12][4] +
-            t->Phi[29]*f->P[13][4] + t->Phi[30]*f->P[14][4] + t->Phi[31]*f->P[15][4] +
-            t->Phi[32]*f->P[16][4] + t->Phi[33]*f->P[17][4];
-    w->M[5] = t->Phi[17]*f->P[0][5] + t->Phi[18]*f->P[1][5] + t->Phi[19]*f->P[2][5] +
-            t->Phi[20]*f->P[3][5] + t->Phi[21]*f->P[4][5] + t->Phi[22]*f->P[5][5] +
-            t->Phi[23]*f->P[6][5] + t->Phi[24]*f->P[8][5] + t->Phi[25]*f->P[9][5] +
-            t->Phi[26]*f->P[10][5] + t->Phi[27]*f->P[11][5] + t->Phi[28]*f->P[12][5] +
-            t->Phi[29]*f->P[13][5] + t->Phi[30]*f->P[14][5] + t->Phi[31]*f->P[15][5] +
-            t->Phi[32]*f->P[16][5] + t->Phi[33]*f->P[17][5];
-    w->M[6] = t->Phi[17]*f->P[0][6] + t->Phi[18]*f->P[1][6] + t->Phi[19]*f->P[2][6] +
-            t->Phi[20]*f->P[3][6] + t->Phi[21]*f->P[4][6] + t->Phi[22]*f->P[5][6] +
-            t->Phi[23]*f->P[6][6] + t->Phi[24]*f->P[8][6] + t->Phi[25]*f->P[9][6] +
-            t->Phi[26]*f->P[10][6] + t->Phi[27]*f->P[11][6] + t->Phi[28]*f->P[12][6] +
-            t->Phi[29]*f->P[13][6] + t->Phi[30]*f->P[14][6] + t->Phi[31]*f->P[15][6] +
-            t->Phi[32]*f->P[16][6] + t->Phi[33]*f->P[17][6];
-    w->M[7] = t->Phi[17]*f->P[0][7] + t->Phi[18]*f->P[1][7] + t->Phi[19]*f->P[2][7] +
-            t->Phi[20]*f->P[3][7] + t->Phi[21]*f->P[4][7] + t->Phi[22]*f->P[5][7] +
-            t->Phi[23]*f->P[6][7] + t->Phi[24]*f->P[8][7] + t->Phi[25]*f->P[9][7] +
-            t->Phi[26]*f->P[10][7] + t->Phi[27]*f->P[11][7] + t->Phi[28]*f->P[12][7] +
-            t->Phi[29]*f->P[13][7] + t->Phi[30]*f->P[14][7] + t->Phi[31]*f->P[15][7] +
-            t->Phi[32]*f->P[16][7] + t->Phi[33]*f->P[17][7];
-    w->M[8] = t->Phi[17]*f->P[0][8] + t->Phi[18]*f->P[1][8] + t->Phi[19]*f->P[2][8] +
-            t->Phi[20]*f->P[3][8] + t->Phi[21]*f->P[4][8] + t->Phi[22]*f->P[5][8] +
-            t->Phi[23]*f->P[6][8] + t->Phi[24]*f->P[8][8] + t->Phi[25]*f->P[9][8] +
-            t->Phi[26]*f->P[10][8] + t->Phi[27]*f->P[11][8] + t->Phi[28]*f->P[12][8] +
-            t->Phi[29]*f->P[13][8] + t->Phi[30]*f->P[14][8] + t->Phi[31]*f->P[15][8] +
-            t->Phi[32]*f->P[16][8] + t->Phi[33]*f->P[17][8];
-    w->M[9] = t->Phi[17]*f->P[0][9] + t->Phi[18]*f->P[1][9] + t->Phi[19]*f->P[2][9] +
-            t->Phi[20]*f->P[3][9] + t->Phi[21]*f->P[4][9] + t->Phi[22]*f->P[5][9] +
-            t->Phi[23]*f->P[6][9] + t->Phi[24]*f->P[8][9] + t->Phi[25]*f->P[9][9] +
-            t->Phi[26]*f->P[10][9] + t->Phi[27]*f->P[11][9] + t->Phi[28]*f->P[12][9] +
-            t->Phi[29]*f->P[13][9] + t->Phi[30]*f->P[14][9] + t->Phi[31]*f->P[15][9] +
-            t->Phi[32]*f->P[16][9] + t->Phi[33]*f->P[17][9];
-    w->M[10] = t->Phi[17]*f->P[0][10] + t->Phi[18]*f->P[1][10] + t->Phi[19]*f->P[2][10] +
-            t->Phi[20]*f->P[3][10] + t->Phi[21]*f->P[4][10] + t->Phi[22]*f->P[5][10] +
-            t->Phi[23]*f->P[6][10] + t->Phi[24]*f->P[8][10] + t->Phi[25]*f->P[9][10] +
-            t->Phi[26]*f->P[10][10] + t->Phi[27]*f->P[11][10] + t->Phi[28]*f->P[12][10] +
-            t->Phi[29]*f->P[13][10] + t->Phi[30]*f->P[14][10] + t->Phi[31]*f->P[15][10] +
-            t->Phi[32]*f->P[16][10] + t->Phi[33]*f->P[17][10];
-    w->M[11] = t->Phi[17]*f->P[0][11] + t->Phi[18]*f->P[1][11] + t->Phi[19]*f->P[2][11] +
-            t->Phi[20]*f->P[3][11] + t->Phi[21]*f->P[4][11] + t->Phi[22]*f->P[5][11] +
-            t->Phi[23]*f->P[6][11] + t->Phi[24]*f->P[8][11] + t->Phi[25]*f->P[9][11] +
-            t->Phi[26]*f->P[10][11] + t->Phi[27]*f->P[11][11] + t->Phi[28]*f->P[12][11] +
-            t->Phi[29]*f->P[13][11] + t->Phi[30]*f->P[14][11] + t->Phi[31]*f->P[15][11] +
-            t->Phi[32]*f->P[16][11] + t->Phi[33]*f->P[17][11];
-    w->M[12] = t->Phi[17]*f->P[0][12] + t->Phi[18]*f->P[1][12] + t->Phi[19]*f->P[2][12] +
-            t->Phi[20]*f->P[3][12] + t->Phi[21]*f->P[4][12] + t->Phi[22]*f->P[5][12] +
-            t->Phi[23]*f->P[6][12] + t->Phi[24]*f->P[8][12] + t->Phi[25]*f->P[9][12] +
-            t->Phi[26]*f->P[10][12] + t->Phi[27]*f->P[11][12] + t->Phi[28]*f->P[12][12] +
-            t->Phi[29]*f->P[13][12] + t->Phi[30]*f->P[14][12] + t->Phi[31]*f->P[15][12] +
-            t->Phi[32]*f->P[16][12] + t->Phi[33]*f->P[17][12];
-    w->M[13] = t->Phi[17]*f->P[0][13] + t->Phi[18]*f->P[1][13] + t->Phi[19]*f->P[2][13] +
-            t->Phi[20]*f->P[3][13] + t->Phi[21]*f->P[4][13] + t->Phi[22]*f->P[5][13] +
-            t->Phi[23]*f->P[6][13] + t->Phi[24]*f->P[8][13] + t->Phi[25]*f->P[9][13] +
-            t->Phi[26]*f->P[10][13] + t->Phi[27]*f->P[11][13] + t->Phi[28]*f->P[12][13] +
-            t->Phi[29]*f->P[13][13] + t->Phi[30]*f->P[14][13] + t->Phi[31]*f->P[15][13] +
-            t->Phi[32]*f->P[16][13] + t->Phi[33]*f->P[17][13];
-    w->M[14] = t->Phi[17]*f->P[0][14] + t->Phi[18]*f->P[1][14] + t->Phi[19]*f->P[2][14] +
-            t->Phi[20]*f->P[3][14] + t->Phi[21]*f->P[4][14] + t->Phi[22]*f->P[5][14] +
-            t->Phi[23]*f->P[6][14] + t->Phi[24]*f->P[8][14] + t->Phi[25]*f->P[9][14] +
-            t->Phi[26]*f->P[10][14] + t->Phi[27]*f->P[11][14] + t->Phi[28]*f->P[12][14] +
-            t->Phi[29]*f->P[13][14] + t->Phi[30]*f->P[14][14] + t->Phi[31]*f->P[15][14] +
-            t->Phi[32]*f->P[16][14] + t->Phi[33]*f->P[17][14];
-    w->M[15] = t->Phi[17]*f->P[0][15] + t->Phi[18]*f->P[1][15] + t->Phi[19]*f->P[2][15] +
-            t->Phi[20]*f->P[3][15] + t->Phi[21]*f->P[4][15] + t->Phi[22]*f->P[5][15] +
-            t->Phi[23]*f->P[6][15] + t->Phi[24]*f->P[8][15] + t->Phi[25]*f->P[9][15] +
-            t->Phi[26]*f->P[10][15] + t->Phi[27]*f->P[11][15] + t->Phi[28]*f->P[12][15] +
-            t->Phi[29]*f->P[13][15] + t->Phi[30]*f->P[14][15] + t->Phi[31]*f->P[15][15] +
-            t->Phi[32]*f->P[16][15] + t->Phi[33]*f->P[17][15];
-    w->M[16] = t->Phi[17]*f->P[0][16] + t->Phi[18]*f->P[1][16] + t->Phi[19]*f->P[2][16] +
-            t->Phi[20]*f->P[3][16] + t->Phi[21]*f->P[4][16] + t->Phi[22]*f->P[5][16] +
-            t->Phi[23]*f->P[6][16] + t->Phi[24]*f->P[8][16] + t->Phi[25]*f->P[9][16] +
-            t->Phi[26]*f->P[10][16] + t->Phi[27]*f->P[11][16] + t->Phi[28]*f->P[12][16] +
-            t->Phi[29]*f->P[13][16] + t->Phi[30]*f->P[14][16] + t->Phi[31]*f->P[15][16] +
-            t->Phi[32]*f->P[16][16] + t->Phi[33]*f->P[17][16];
-    w->M[17] = t->Phi[17]*f->P[0][17] + t->Phi[18]*f->P[1][17] + t->Phi[19]*f->P[2][17] +
-            t->Phi[20]*f->P[3][17] + t->Phi[21]*f->P[4][17] + t->Phi[22]*f->P[5][17] +
-            t->Phi[23]*f->P[6][17] + t->Phi[24]*f->P[8][17] + t->Phi[25]*f->P[9][17] +
-            t->Phi[26]*f->P[10][17] + t->Phi[27]*f->P[11][17] + t->Phi[28]*f->P[12][17] +
-            t->Phi[29]*f->P[13][17] + t->Phi[30]*f->P[14][17] + t->Phi[31]*f->P[15][17] +
-            t->Phi[32]*f->P[16][17] + t->Phi[33]*f->P[17][17];
+    int c;
+    lane_pair b[17];
+    b[0] = lane_pair_of(t->Phi[17], t->Phi[17]);
+    b[1] = lane_pair_of(t->Phi[18], t->Phi[18]);
+    b[2] = lane_pair_of(t->Phi[19], t->Phi[19]);
+    b[3] = lane_pair_of(t->Phi[20], t->Phi[20]);
+    b[4] = lane_pair_of(t->Phi[21], t->Phi[21]);
+    b[5] = lane_pair_of(t->Phi[22], t->Phi[22]);
+    b[6] = lane_pair_of(t->Phi[23], t->Phi[23]);
+    b[7] = lane_pair_of(t->Phi[24], t->Phi[24]);
+    b[8] = lane_pair_of(t->Phi[25], t->Phi[25]);
+    b[9] = lane_pair_of(t->Phi[26], t->Phi[26]);
+    b[10] = lane_pair_of(t->Phi[27], t->Phi[27]);
+    b[11] = lane_pair_of(t->Phi[28], t->Phi[28]);
+    b[12] = lane_pair_of(t->Phi[29], t->Phi[29]);
+    b[13] = lane_pair_of(t->Phi[30], t->Phi[30]);
+    b[14] = lane_pair_of(t->Phi[31], t->Phi[31]);
+    b[15] = lane_pair_of(t->Phi[32], t->Phi[32]);
+    b[16] = lane_pair_of(t->Phi[33], t->Phi[33]);
+    for (c = 0; c + 1 < 18; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[16][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[17][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -3770,114 +3829,45 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar propagate_row_1(const enu_doppler18_tra
 ENU_DOPPLER18_BLOCK void phi_times_p_row_2(const enu_doppler18_filter *restrict f, const
         enu_doppler18_transition *restrict t, enu_doppler18_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[34]*f->P[0][0] + t->Phi[35]*f->P[1][0] + t->Phi[36]*f->P[2][0] +
-            t->Phi[37]*f->P[3][0] + t->Phi[38]*f->P[4][0] + t->Phi[39]*f->P[5][0] +
-            t->Phi[40]*f->P[6][0] + t->Phi[41]*f->P[8][0] + t->Phi[42]*f->P[9][0] +
-            t->Phi[43]*f->P[10][0] + t->Phi[44]*f->P[11][0] + t->Phi[45]*f->P[12][0] +
-            t->Phi[46]*f->P[13][0] + t->Phi[47]*f->P[14][0] + t->Phi[48]*f->P[15][0] +
-            t->Phi[49]*f->P[16][0] + t->Phi[50]*f->P[17][0];
-    w->M[1] = t->Phi[34]*f->P[0][1] + t->Phi[35]*f->P[1][1] + t->Phi[36]*f->P[2][1] +
-            t->Phi[37]*f->P[3][1] + t->Phi[38]*f->P[4][1] + t->Phi[39]*f->P[5][1] +
-            t->Phi[40]*f->P[6][1] + t->Phi[41]*f->P[8][1] + t->Phi[42]*f->P[9][1] +
-            t->Phi[43]*f->P[10][1] + t->Phi[44]*f->P[11][1] + t->Phi[45]*f->P[12][1] +
-            t->Phi[46]*f->P[13][1] + t->Phi[47]*f->P[14][1] + t->Phi[48]*f->P[15][1] +
-            t->Phi[49]*f->P[16][1] + t->Phi[50]*f->P[17][1];
-    w->M[2] = t->Phi[34]*f->P[0][2] + t->Phi[35]*f->P[1][2] + t->Phi[36]*f->P[2][2] +
-            t->Phi[37]*f->P[3][2] + t->Phi[38]*f->P[4][2] + t->Phi[39]*f->P[5][2] +
-            t->Phi[40]*f->P[6][2] + t->Phi[41]*f->P[8][2] + t->Phi[42]*f->P[9][2] +
-            t->Phi[43]*f->P[10][2] + t->Phi[44]*f->P[11][2] + t->Phi[45]*f->P[12][2] +
-            t->Phi[46]*f->P[13][2] + t->Phi[47]*f->P[14][2] + t->Phi[48]*f->P[15][2] +
-            t->Phi[49]*f->P[16][2] + t->Phi[50]*f->P[17][2];
-    w->M[3] = t->Phi[34]*f->P[0][3] + t->Phi[35]*f->P[1][3] + t->Phi[36]*f->P[2][3] +
-            t->Phi[37]*f->P[3][3] + t->Phi[38]*f->P[4][3] + t->Phi[39]*f->P[5][3] +
-            t->Phi[40]*f->P[6][3] + t->Phi[41]*f->P[8][3] + t->Phi[42]*f->P[9][3] +
-            t->Phi[43]*f->P[10][3] + t->Phi[44]*f->P[11][3] + t->Phi[45]*f->P[12][3] +
-            t->Phi[46]*f->P[13][3] + t->Phi[47]*f->P[14][3] + t->Phi[48]*f->P[15][3] +
-            t->Phi[49]*f->P[16][3] + t->Phi[50]*f->P[17][3];
-    w->M[4] = t->Phi[34]*f->P[0][4] + t->Phi[35]*f->P[1][4] + t->Phi[36]*f->P[2][4] +
-            t->Phi[37]*f->P[3][4] + t->Phi[38]*f->P[4][4] + t->Phi[39]*f->P[5][4] +
-            t->Phi[40]*f->P[6][4] + t->Phi[41]*f->P[8][4] + t->Phi[42]*f->P[9][4] +
-            t->Phi[43]*f->P[10][4] + t->Phi[44]*f->P[11][4] + t->Phi[45]*f->P[12][4] +
-            t->Phi[46]*f->P[13][4] + t->Phi[47]*f->P[14][4] + t->Phi[48]*f->P[15][4] +
-            t->Phi[49]*f->P[16][4] + t->Phi[50]*f->P[17][4];
-    w->M[5] = t->Phi[34]*f->P[0][5] + t->Phi[35]*f->P[1][5] + t->Phi[36]*f->P[2][5] +
-            t->Phi[37]*f->P[3][5] + t->Phi[38]*f->P[4][5] + t->Phi[39]*f->P[5][5] +
-            t->Phi[40]*f->P[6][5] + t->Phi[41]*f->P[8][5] + t->Phi[42]*f->P[9][5] +
-            t->Phi[43]*f->P[10][5] + t->Phi[44]*f->P[11][5] + t->Phi[45]*f->P[12][5] +
-            t->Phi[46]*f->P[13][5] + t->Phi[47]*f->P[14][5] + t->Phi[48]*f->P[15][5] +
-            t->Phi[49]*f->P[16][5] + t->Phi[50]*f->P[17][5];
-    w->M[6] = t->Phi[34]*f->P[0][6] + t->Phi[35]*f->P[1][6] + t->Phi[36]*f->P[2][6] +
-            t->Phi[37]*f->P[3][6] + t->Phi[38]*f->P[4][6] + t->Phi[39]*f->P[5][6] +
-            t->Phi[40]*f->P[6][6] + t->Phi[41]*f->P[8][6] + t->Phi[42]*f->P[9][6] +
-            t->Phi[43]*f->P[10][6] + t->Phi[44]*f->P[11][6] + t->Phi[45]*f->P[12][6] +
-            t->Phi[46]*f->P[13][6] + t->Phi[47]*f->P[14][6] + t->Phi[48]*f->P[15][6] +
-            t->Phi[49]*f->P[16][6] + t->Phi[50]*f->P[17][6];
-    w->M[7] = t->Phi[34]*f->P[0][7] + t->Phi[35]*f->P[1][7] + t->Phi[36]*f->P[2][7] +
-            t->Phi[37]*f->P[3][7] + t->Phi[38]*f->P[4][7] + t->Phi[39]*f->P[5][7] +
-            t->Phi[40]*f->P[6][7] + t->Phi[41]*f->P[8][7] + t->Phi[42]*f->P[9][7] +
-            t->Phi[43]*f->P[10][7] + t->Phi[44]*f->P[11][7] + t->Phi[45]*f->P[12][7] +
-            t->Phi[46]*f->P[13][7] + t->Phi[47]*f->P[14][7] + t->Phi[48]*f->P[15][7] +
-            t->Phi[49]*f->P[16][7] + t->Phi[50]*f->P[17][7];
-    w->M[8] = t->Phi[34]*f->P[0][8] + t->Phi[35]*f->P[1][8] + t->Phi[36]*f->P[2][8] +
-            t->Phi[37]*f->P[3][8] + t->Phi[38]*f->P[4][8] + t->Phi[39]*f->P[5][8] +
-            t->Phi[40]*f->P[6][8] + t->Phi[41]*f->P[8][8] + t->Phi[42]*f->P[9][8] +
-            t->Phi[43]*f->P[10][8] + t->Phi[44]*f->P[11][8] + t->Phi[45]*f->P[12][8] +
-            t->Phi[46]*f->P[13][8] + t->Phi[47]*f->P[14][8] + t->Phi[48]*f->P[15][8] +
-            t->Phi[49]*f->P[16][8] + t->Phi[50]*f->P[17][8];
-    w->M[9] = t->Phi[34]*f->P[0][9] + t->Phi[35]*f->P[1][9] + t->Phi[36]*f->P[2][9] +
-            t->Phi[37]*f->P[3][9] + t->Phi[38]*f->P[4][9] + t->Phi[39]*f->P[5][9] +
-            t->Phi[40]*f->P[6][9] + t->Phi[41]*f->P[8][9] + t->Phi[42]*f->P[9][9] +
-            t->Phi[43]*f->P[10][9] + t->Phi[44]*f->P[11][9] + t->Phi[45]*f->P[12][9] +
-            t->Phi[46]*f->P[13][9] + t->Phi[47]*f->P[14][9] + t->Phi[48]*f->P[15][9] +
-            t->Phi[49]*f->P[16][9] + t->Phi[50]*f->P[17][9];
-    w->M[10] = t->Phi[34]*f->P[0][10] + t->Phi[35]*f->P[1][10] + t->Phi[36]*f->P[2][10] +
-            t->Phi[37]*f->P[3][10] + t->Phi[38]*f->P[4][10] + t->Phi[39]*f->P[5][10] +
-            t->Phi[40]*f->P[6][10] + t->Phi[41]*f->P[8][10] + t->Phi[42]*f->P[9][10] +
-            t->Phi[43]*f->P[10][10] + t->Phi[44]*f->P[11][10] + t->Phi[45]*f->P[12][10] +
-            t->Phi[46]*f->P[13][10] + t->Phi[47]*f->P[14][10] + t->Phi[48]*f->P[15][10] +
-            t->Phi[49]*f->P[16][10] + t->Phi[50]*f->P[17][10];
-    w->M[11] = t->Phi[34]*f->P[0][11] + t->Phi[35]*f->P[1][11] + t->Phi[36]*f->P[2][11] +
-            t->Phi[37]*f->P[3][11] + t->Phi[38]*f->P[4][11] + t->Phi[39]*f->P[5][11] +
-            t->Phi[40]*f->P[6][11] + t->Phi[41]*f->P[8][11] + t->Phi[42]*f->P[9][11] +
-            t->Phi[43]*f->P[10][11] + t->Phi[44]*f->P[11][11] + t->Phi[45]*f->P[12][11] +
-            t->Phi[46]*f->P[13][11] + t->Phi[47]*f->P[14][11] + t->Phi[48]*f->P[15][11] +
-            t->Phi[49]*f->P[16][11] + t->Phi[50]*f->P[17][11];
-    w->M[12] = t->Phi[34]*f->P[0][12] + t->Phi[35]*f->P[1][12] + t->Phi[36]*f->P[2][12] +
-            t->Phi[37]*f->P[3][12] + t->Phi[38]*f->P[4][12] + t->Phi[39]*f->P[5][12] +
-            t->Phi[40]*f->P[6][12] + t->Phi[41]*f->P[8][12] + t->Phi[42]*f->P[9][12] +
-            t->Phi[43]*f->P[10][12] + t->Phi[44]*f->P[11][12] + t->Phi[45]*f->P[12][12] +
-            t->Phi[46]*f->P[13][12] + t->Phi[47]*f->P[14][12] + t->Phi[48]*f->P[15][12] +
-            t->Phi[49]*f->P[16][12] + t->Phi[50]*f->P[17][12];
-    w->M[13] = t->Phi[34]*f->P[0][13] + t->Phi[35]*f->P[1][13] + t->Phi[36]*f->P[2][13] +
-            t->Phi[37]*f->P[3][13] + t->Phi[38]*f->P[4][13] + t->Phi[39]*f->P[5][13] +
-            t->Phi[40]*f->P[6][13] + t->Phi[41]*f->P[8][13] + t->Phi[42]*f->P[9][13] +
-            t->Phi[43]*f->P[10][13] + t->Phi[44]*f->P[11][13] + t->Phi[45]*f->P[12][13] +
-            t->Phi[46]*f->P[13][13] + t->Phi[47]*f->P[14][13] + t->Phi[48]*f->P[15][13] +
-            t->Phi[49]*f->P[16][13] + t->Phi[50]*f->P[17][13];
-    w->M[14] = t->Phi[34]*f->P[0][14] + t->Phi[35]*f->P[1][14] + t->Phi[36]*f->P[2][14] +
-            t->Phi[37]*f->P[3][14] + t->Phi[38]*f->P[4][14] + t->Phi[39]*f->P[5][14] +
-            t->Phi[40]*f->P[6][14] + t->Phi[41]*f->P[8][14] + t->Phi[42]*f->P[9][14] +
-            t->Phi[43]*f->P[10][14] + t->Phi[44]*f->P[11][14] + t->Phi[45]*f->P[12][14] +
-            t->Phi[46]*f->P[13][14] + t->Phi[47]*f->P[14][14] + t->Phi[48]*f->P[15][14] +
-            t->Phi[49]*f->P[16][14] + t->Phi[50]*f->P[17][14];
-    w->M[15] = t->Phi[34]*f->P[0][15] + t->Phi[35]*f->P[1][15] + t->Phi[36]*f->P[2][15] +
-            t->Phi[37]*f->P[3][15] + t->Phi[38]*f->P[4][15] + t->Phi[39]*f->P[5][15] +
-            t->Phi[40]*f->P[6][15] + t->Phi[41]*f->P[8][15] + t->Phi[42]*f->P[9][15] +
-            t->Phi[43]*f->P[10][15] + t->Phi[44]*f->P[11][15] + t->Phi[45]*f->P[12][15] +
-            t->Phi[46]*f->P[13][15] + t->Phi[47]*f->P[14][15] + t->Phi[48]*f->P[15][15] +
-            t->Phi[49]*f->P[16][15] + t->Phi[50]*f->P[17][15];
-    w->M[16] = t->Phi[34]*f->P[0][16] + t->Phi[35]*f->P[1][16] + t->Phi[36]*f->P[2][16] +
-            t->Phi[37]*f->P[3][16] + t->Phi[38]*f->P[4][16] + t->Phi[39]*f->P[5][16] +
-            t->Phi[40]*f->P[6][16] + t->Phi[41]*f->P[8][16] + t->Phi[42]*f->P[9][16] +
-            t->Phi[43]*f->P[10][16] + t->Phi[44]*f->P[11][16] + t->Phi[45]*f->P[12][16] +
-            t->Phi[46]*f->P[13][16] + t->Phi[47]*f->P[14][16] + t->Phi[48]*f->P[15][16] +
-            t->Phi[49]*f->P[16][16] + t->Phi[50]*f->P[17][16];
-    w->M[17] = t->Phi[34]*f->P[0][17] + t->Phi[35]*f->P[1][17] + t->Phi[36]*f->P[2][17] +
-            t->Phi[37]*f->P[3][17] + t->Phi[38]*f->P[4][17] + t->Phi[39]*f->P[5][17] +
-            t->Phi[40]*f->P[6][17] + t->Phi[41]*f->P[8][17] + t->Phi[42]*f->P[9][17] +
-            t->Phi[43]*f->P[10][17] + t->Phi[44]*f->P[11][17] + t->Phi[45]*f->P[12][17] +
-            t->Phi[46]*f->P[13][17] + t->Phi[47]*f->P[14][17] + t->Phi[48]*f->P[15][17] +
-            t->Phi[49]*f->P[16][17] + t->Phi[50]*f->P[17][17];
+    int c;
+    lane_pair b[17];
+    b[0] = lane_pair_of(t->Phi[34], t->Phi[34]);
+    b[1] = lane_pair_of(t->Phi[35], t->Phi[35]);
+    b[2] = lane_pair_of(t->Phi[36], t->Phi[36]);
+    b[3] = lane_pair_of(t->Phi[37], t->Phi[37]);
+    b[4] = lane_pair_of(t->Phi[38], t->Phi[38]);
+    b[5] = lane_pair_of(t->Phi[39], t->Phi[39]);
+    b[6] = lane_pair_of(t->Phi[40], t->Phi[40]);
+    b[7] = lane_pair_of(t->Phi[41], t->Phi[41]);
+    b[8] = lane_pair_of(t->Phi[42], t->Phi[42]);
+    b[9] = lane_pair_of(t->Phi[43], t->Phi[43]);
+    b[10] = lane_pair_of(t->Phi[44], t->Phi[44]);
+    b[11] = lane_pair_of(t->Phi[45], t->Phi[45]);
+    b[12] = lane_pair_of(t->Phi[46], t->Phi[46]);
+    b[13] = lane_pair_of(t->Phi[47], t->Phi[47]);
+    b[14] = lane_pair_of(t->Phi[48], t->Phi[48]);
+    b[15] = lane_pair_of(t->Phi[49], t->Phi[49]);
+    b[16] = lane_pair_of(t->Phi[50], t->Phi[50]);
+    for (c = 0; c + 1 < 18; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[16][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[17][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -3966,114 +3956,45 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar propagate_row_2(const enu_doppler18_tra
 ENU_DOPPLER18_BLOCK void phi_times_p_row_3(const enu_doppler18_filter *restrict f, const
         enu_doppler18_transition *restrict t, enu_doppler18_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[51]*f->P[0][0] + t->Phi[52]*f->P[1][0] + t->Phi[53]*f->P[2][0] +
-            t->Phi[54]*f->P[3][0] + t->Phi[55]*f->P[4][0] + t->Phi[56]*f->P[5][0] +
-            t->Phi[57]*f->P[6][0] + t->Phi[58]*f->P[8][0] + t->Phi[59]*f->P[9][0] +
-            t->Phi[60]*f->P[10][0] + t->Phi[61]*f->P[11][0] + t->Phi[62]*f->P[12][0] +
-            t->Phi[63]*f->P[13][0] + t->Phi[64]*f->P[14][0] + t->Phi[65]*f->P[15][0] +
-            t->Phi[66]*f->P[16][0] + t->Phi[67]*f->P[17][0];
-    w->M[1] = t->Phi[51]*f->P[0][1] + t->Phi[52]*f->P[1][1] + t->Phi[53]*f->P[2][1] +
-            t->Phi[54]*f->P[3][1] + t->Phi[55]*f->P[4][1] + t->Phi[56]*f->P[5][1] +
-            t->Phi[57]*f->P[6][1] + t->Phi[58]*f->P[8][1] + t->Phi[59]*f->P[9][1] +
-            t->Phi[60]*f->P[10][1] + t->Phi[61]*f->P[11][1] + t->Phi[62]*f->P[12][1] +
-            t->Phi[63]*f->P[13][1] + t->Phi[64]*f->P[14][1] + t->Phi[65]*f->P[15][1] +
-            t->Phi[66]*f->P[16][1] + t->Phi[67]*f->P[17][1];
-    w->M[2] = t->Phi[51]*f->P[0][2] + t->Phi[52]*f->P[1][2] + t->Phi[53]*f->P[2][2] +
-            t->Phi[54]*f->P[3][2] + t->Phi[55]*f->P[4][2] + t->Phi[56]*f->P[5][2] +
-            t->Phi[57]*f->P[6][2] + t->Phi[58]*f->P[8][2] + t->Phi[59]*f->P[9][2] +
-            t->Phi[60]*f->P[10][2] + t->Phi[61]*f->P[11][2] + t->Phi[62]*f->P[12][2] +
-            t->Phi[63]*f->P[13][2] + t->Phi[64]*f->P[14][2] + t->Phi[65]*f->P[15][2] +
-            t->Phi[66]*f->P[16][2] + t->Phi[67]*f->P[17][2];
-    w->M[3] = t->Phi[51]*f->P[0][3] + t->Phi[52]*f->P[1][3] + t->Phi[53]*f->P[2][3] +
-            t->Phi[54]*f->P[3][3] + t->Phi[55]*f->P[4][3] + t->Phi[56]*f->P[5][3] +
-            t->Phi[57]*f->P[6][3] + t->Phi[58]*f->P[8][3] + t->Phi[59]*f->P[9][3] +
-            t->Phi[60]*f->P[10][3] + t->Phi[61]*f->P[11][3] + t->Phi[62]*f->P[12][3] +
-            t->Phi[63]*f->P[13][3] + t->Phi[64]*f->P[14][3] + t->Phi[65]*f->P[15][3] +
-            t->Phi[66]*f->P[16][3] + t->Phi[67]*f->P[17][3];
-    w->M[4] = t->Phi[51]*f->P[0][4] + t->Phi[52]*f->P[1][4] + t->Phi[53]*f->P[2][4] +
-            t->Phi[54]*f->P[3][4] + t->Phi[55]*f->P[4][4] + t->Phi[56]*f->P[5][4] +
-            t->Phi[57]*f->P[6][4] + t->Phi[58]*f->P[8][4] + t->Phi[59]*f->P[9][4] +
-            t->Phi[60]*f->P[10][4] + t->Phi[61]*f->P[11][4] + t->Phi[62]*f->P[12][4] +
-            t->Phi[63]*f->P[13][4] + t->Phi[64]*f->P[14][4] + t->Phi[65]*f->P[15][4] +
-            t->Phi[66]*f->P[16][4] + t->Phi[67]*f->P[17][4];
-    w->M[5] = t->Phi[51]*f->P[0][5] + t->Phi[52]*f->P[1][5] + t->Phi[53]*f->P[2][5] +
-            t->Phi[54]*f->P[3][5] + t->Phi[55]*f->P[4][5] + t->Phi[56]*f->P[5][5] +
-            t->Phi[57]*f->P[6][5] + t->Phi[58]*f->P[8][5] + t->Phi[59]*f->P[9][5] +
-            t->Phi[60]*f->P[10][5] + t->Phi[61]*f->P[11][5] + t->Phi[62]*f->P[12][5] +
-            t->Phi[63]*f->P[13][5] + t->Phi[64]*f->P[14][5] + t->Phi[65]*f->P[15][5] +
-            t->Phi[66]*f->P[16][5] + t->Phi[67]*f->P[17][5];
-    w->M[6] = t->Phi[51]*f->P[0][6] + t->Phi[52]*f->P[1][6] + t->Phi[53]*f->P[2][6] +
-            t->Phi[54]*f->P[3][6] + t->Phi[55]*f->P[4][6] + t->Phi[56]*f->P[5][6] +
-            t->Phi[57]*f->P[6][6] + t->Phi[58]*f->P[8][6] + t->Phi[59]*f->P[9][6] +
-            t->Phi[60]*f->P[10][6] + t->Phi[61]*f->P[11][6] + t->Phi[62]*f->P[12][6] +
-            t->Phi[63]*f->P[13][6] + t->Phi[64]*f->P[14][6] + t->Phi[65]*f->P[15][6] +
-            t->Phi[66]*f->P[16][6] + t->Phi[67]*f->P[17][6];
-    w->M[7] = t->Phi[51]*f->P[0][7] + t->Phi[52]*f->P[1][7] + t->Phi[53]*f->P[2][7] +
-            t->Phi[54]*f->P[3][7] + t->Phi[55]*f->P[4][7] + t->Phi[56]*f->P[5][7] +
-            t->Phi[57]*f->P[6][7] + t->Phi[58]*f->P[8][7] + t->Phi[59]*f->P[9][7] +
-            t->Phi[60]*f->P[10][7] + t->Phi[61]*f->P[11][7] + t->Phi[62]*f->P[12][7] +
-            t->Phi[63]*f->P[13][7] + t->Phi[64]*f->P[14][7] + t->Phi[65]*f->P[15][7] +
-            t->Phi[66]*f->P[16][7] + t->Phi[67]*f->P[17][7];
-    w->M[8] = t->Phi[51]*f->P[0][8] + t->Phi[52]*f->P[1][8] + t->Phi[53]*f->P[2][8] +
-            t->Phi[54]*f->P[3][8] + t->Phi[55]*f->P[4][8] + t->Phi[56]*f->P[5][8] +
-            t->Phi[57]*f->P[6][8] + t->Phi[58]*f->P[8][8] + t->Phi[59]*f->P[9][8] +
-            t->Phi[60]*f->P[10][8] + t->Phi[61]*f->P[11][8] + t->Phi[62]*f->P[12][8] +
-            t->Phi[63]*f->P[13][8] + t->Phi[64]*f->P[14][8] + t->Phi[65]*f->P[15][8] +
-            t->Phi[66]*f->P[16][8] + t->Phi[67]*f->P[17][8];
-    w->M[9] = t->Phi[51]*f->P[0][9] + t->Phi[52]*f->P[1][9] + t->Phi[53]*f->P[2][9] +
-            t->Phi[54]*f->P[3][9] + t->Phi[55]*f->P[4][9] + t->Phi[56]*f->P[5][9] +
-            t->Phi[57]*f->P[6][9] + t->Phi[58]*f->P[8][9] + t->Phi[59]*f->P[9][9] +
-            t->Phi[60]*f->P[10][9] + t->Phi[61]*f->P[11][9] + t->Phi[62]*f->P[12][9] +
-            t->Phi[63]*f->P[13][9] + t->Phi[64]*f->P[14][9] + t->Phi[65]*f->P[15][9] +
-            t->Phi[66]*f->P[16][9] + t->Phi[67]*f->P[17][9];
-    w->M[10] = t->Phi[51]*f->P[0][10] + t->Phi[52]*f->P[1][10] + t->Phi[53]*f->P[2][10] +
-            t->Phi[54]*f->P[3][10] + t->Phi[55]*f->P[4][10] + t->Phi[56]*f->P[5][10] +
-            t->Phi[57]*f->P[6][10] + t->Phi[58]*f->P[8][10] + t->Phi[59]*f->P[9][10] +
-            t->Phi[60]*f->P[10][10] + t->Phi[61]*f->P[11][10] + t->Phi[62]*f->P[12][10] +
-            t->Phi[63]*f->P[13][10] + t->Phi[64]*f->P[14][10] + t->Phi[65]*f->P[15][10] +
-            t->Phi[66]*f->P[16][10] + t->Phi[67]*f->P[17][10];
-    w->M[11] = t->Phi[51]*f->P[0][11] + t->Phi[52]*f->P[1][11] + t->Phi[53]*f->P[2][11] +
-            t->Phi[54]*f->P[3][11] + t->Phi[55]*f->P[4][11] + t->Phi[56]*f->P[5][11] +
-            t->Phi[57]*f->P[6][11] + t->Phi[58]*f->P[8][11] + t->Phi[59]*f->P[9][11] +
-            t->Phi[60]*f->P[10][11] + t->Phi[61]*f->P[11][11] + t->Phi[62]*f->P[12][11] +
-            t->Phi[63]*f->P[13][11] + t->Phi[64]*f->P[14][11] + t->Phi[65]*f->P[15][11] +
-            t->Phi[66]*f->P[16][11] + t->Phi[67]*f->P[17][11];
-    w->M[12] = t->Phi[51]*f->P[0][12] + t->Phi[52]*f->P[1][12] + t->Phi[53]*f->P[2][12] +
-            t->Phi[54]*f->P[3][12] + t->Phi[55]*f->P[4][12] + t->Phi[56]*f->P[5][12] +
-            t->Phi[57]*f->P[6][12] + t->Phi[58]*f->P[8][12] + t->Phi[59]*f->P[9][12] +
-            t->Phi[60]*f->P[10][12] + t->Phi[61]*f->P[11][12] + t->Phi[62]*f->P[12][12] +
-            t->Phi[63]*f->P[13][12] + t->Phi[64]*f->P[14][12] + t->Phi[65]*f->P[15][12] +
-            t->Phi[66]*f->P[16][12] + t->Phi[67]*f->P[17][12];
-    w->M[13] = t->Phi[51]*f->P[0][13] + t->Phi[52]*f->P[1][13] + t->Phi[53]*f->P[2][13] +
-            t->Phi[54]*f->P[3][13] + t->Phi[55]*f->P[4][13] + t->Phi[56]*f->P[5][13] +
-            t->Phi[57]*f->P[6][13] + t->Phi[58]*f->P[8][13] + t->Phi[59]*f->P[9][13] +
-            t->Phi[60]*f->P[10][13] + t->Phi[61]*f->P[11][13] + t->Phi[62]*f->P[12][13] +
-            t->Phi[63]*f->P[13][13] + t->Phi[64]*f->P[14][13] + t->Phi[65]*f->P[15][13] +
-            t->Phi[66]*f->P[16][13] + t->Phi[67]*f->P[17][13];
-    w->M[14] = t->Phi[51]*f->P[0][14] + t->Phi[52]*f->P[1][14] + t->Phi[53]*f->P[2][14] +
-            t->Phi[54]*f->P[3][14] + t->Phi[55]*f->P[4][14] + t->Phi[56]*f->P[5][14] +
-            t->Phi[57]*f->P[6][14] + t->Phi[58]*f->P[8][14] + t->Phi[59]*f->P[9][14] +
-            t->Phi[60]*f->P[10][14] + t->Phi[61]*f->P[11][14] + t->Phi[62]*f->P[12][14] +
-            t->Phi[63]*f->P[13][14] + t->Phi[64]*f->P[14][14] + t->Phi[65]*f->P[15][14] +
-            t->Phi[66]*f->P[16][14] + t->Phi[67]*f->P[17][14];
-    w->M[15] = t->Phi[51]*f->P[0][15] + t->Phi[52]*f->P[1][15] + t->Phi[53]*f->P[2][15] +
-            t->Phi[54]*f->P[3][15] + t->Phi[55]*f->P[4][15] + t->Phi[56]*f->P[5][15] +
-            t->Phi[57]*f->P[6][15] + t->Phi[58]*f->P[8][15] + t->Phi[59]*f->P[9][15] +
-            t->Phi[60]*f->P[10][15] + t->Phi[61]*f->P[11][15] + t->Phi[62]*f->P[12][15] +
-            t->Phi[63]*f->P[13][15] + t->Phi[64]*f->P[14][15] + t->Phi[65]*f->P[15][15] +
-            t->Phi[66]*f->P[16][15] + t->Phi[67]*f->P[17][15];
-    w->M[16] = t->Phi[51]*f->P[0][16] + t->Phi[52]*f->P[1][16] + t->Phi[53]*f->P[2][16] +
-            t->Phi[54]*f->P[3][16] + t->Phi[55]*f->P[4][16] + t->Phi[56]*f->P[5][16] +
-            t->Phi[57]*f->P[6][16] + t->Phi[58]*f->P[8][16] + t->Phi[59]*f->P[9][16] +
-            t->Phi[60]*f->P[10][16] + t->Phi[61]*f->P[11][16] + t->Phi[62]*f->P[12][16] +
-            t->Phi[63]*f->P[13][16] + t->Phi[64]*f->P[14][16] + t->Phi[65]*f->P[15][16] +
-            t->Phi[66]*f->P[16][16] + t->Phi[67]*f->P[17][16];
-    w->M[17] = t->Phi[51]*f->P[0][17] + t->Phi[52]*f->P[1][17] + t->Phi[53]*f->P[2][17] +
-            t->Phi[54]*f->P[3][17] + t->Phi[55]*f->P[4][17] + t->Phi[56]*f->P[5][17] +
-            t->Phi[57]*f->P[6][17] + t->Phi[58]*f->P[8][17] + t->Phi[59]*f->P[9][17] +
-            t->Phi[60]*f->P[10][17] + t->Phi[61]*f->P[11][17] + t->Phi[62]*f->P[12][17] +
-            t->Phi[63]*f->P[13][17] + t->Phi[64]*f->P[14][17] + t->Phi[65]*f->P[15][17] +
-            t->Phi[66]*f->P[16][17] + t->Phi[67]*f->P[17][17];
+    int c;
+    lane_pair b[17];
+    b[0] = lane_pair_of(t->Phi[51], t->Phi[51]);
+    b[1] = lane_pair_of(t->Phi[52], t->Phi[52]);
+    b[2] = lane_pair_of(t->Phi[53], t->Phi[53]);
+    b[3] = lane_pair_of(t->Phi[54], t->Phi[54]);
+    b[4] = lane_pair_of(t->Phi[55], t->Phi[55]);
+    b[5] = lane_pair_of(t->Phi[56], t->Phi[56]);
+    b[6] = lane_pair_of(t->Phi[57], t->Phi[57]);
+    b[7] = lane_pair_of(t->Phi[58], t->Phi[58]);
+    b[8] = lane_pair_of(t->Phi[59], t->Phi[59]);
+    b[9] = lane_pair_of(t->Phi[60], t->Phi[60]);
+    b[10] = lane_pair_of(t->Phi[61], t->Phi[61]);
+    b[11] = lane_pair_of(t->Phi[62], t->Phi[62]);
+    b[12] = lane_pair_of(t->Phi[63], t->Phi[63]);
+    b[13] = lane_pair_of(t->Phi[64], t->Phi[64]);
+    b[14] = lane_pair_of(t->Phi[65], t->Phi[65]);
+    b[15] = lane_pair_of(t->Phi[66], t->Phi[66]);
+    b[16] = lane_pair_of(t->Phi[67], t->Phi[67]);
+    for (c = 0; c + 1 < 18; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[16][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[17][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -4153,114 +4074,45 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar propagate_row_3(const enu_doppler18_tra
 ENU_DOPPLER18_BLOCK void phi_times_p_row_4(const enu_doppler18_filter *restrict f, const
         enu_doppler18_transition *restrict t, enu_doppler18_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[68]*f->P[0][0] + t->Phi[69]*f->P[1][0] + t->Phi[70]*f->P[2][0] +
-            t->Phi[71]*f->P[3][0] + t->Phi[72]*f->P[4][0] + t->Phi[73]*f->P[5][0] +
-            t->Phi[74]*f->P[6][0] + t->Phi[75]*f->P[8][0] + t->Phi[76]*f->P[9][0] +
-            t->Phi[77]*f->P[10][0] + t->Phi[78]*f->P[11][0] + t->Phi[79]*f->P[12][0] +
-            t->Phi[80]*f->P[13][0] + t->Phi[81]*f->P[14][0] + t->Phi[82]*f->P[15][0] +
-            t->Phi[83]*f->P[16][0] + t->Phi[84]*f->P[17][0];
-    w->M[1] = t->Phi[68]*f->P[0][1] + t->Phi[69]*f->P[1][1] + t->Phi[70]*f->P[2][1] +
-            t->Phi[71]*f->P[3][1] + t->Phi[72]*f->P[4][1] + t->Phi[73]*f->P[5][1] +
-            t->Phi[74]*f->P[6][1] + t->Phi[75]*f->P[8][1] + t->Phi[76]*f->P[9][1] +
-            t->Phi[77]*f->P[10][1] + t->Phi[78]*f->P[11][1] + t->Phi[79]*f->P[12][1] +
-            t->Phi[80]*f->P[13][1] + t->Phi[81]*f->P[14][1] + t->Phi[82]*f->P[15][1] +
-            t->Phi[83]*f->P[16][1] + t->Phi[84]*f->P[17][1];
-    w->M[2] = t->Phi[68]*f->P[0][2] + t->Phi[69]*f->P[1][2] + t->Phi[70]*f->P[2][2] +
-            t->Phi[71]*f->P[3][2] + t->Phi[72]*f->P[4][2] + t->Phi[73]*f->P[5][2] +
-            t->Phi[74]*f->P[6][2] + t->Phi[75]*f->P[8][2] + t->Phi[76]*f->P[9][2] +
-            t->Phi[77]*f->P[10][2] + t->Phi[78]*f->P[11][2] + t->Phi[79]*f->P[12][2] +
-            t->Phi[80]*f->P[13][2] + t->Phi[81]*f->P[14][2] + t->Phi[82]*f->P[15][2] +
-            t->Phi[83]*f->P[16][2] + t->Phi[84]*f->P[17][2];
-    w->M[3] = t->Phi[68]*f->P[0][3] + t->Phi[69]*f->P[1][3] + t->Phi[70]*f->P[2][3] +
-            t->Phi[71]*f->P[3][3] + t->Phi[72]*f->P[4][3] + t->Phi[73]*f->P[5][3] +
-            t->Phi[74]*f->P[6][3] + t->Phi[75]*f->P[8][3] + t->Phi[76]*f->P[9][3] +
-            t->Phi[77]*f->P[10][3] + t->Phi[78]*f->P[11][3] + t->Phi[79]*f->P[12][3] +
-            t->Phi[80]*f->P[13][3] + t->Phi[81]*f->P[14][3] + t->Phi[82]*f->P[15][3] +
-            t->Phi[83]*f->P[16][3] + t->Phi[84]*f->P[17][3];
-    w->M[4] = t->Phi[68]*f->P[0][4] + t->Phi[69]*f->P[1][4] + t->Phi[70]*f->P[2][4] +
-            t->Phi[71]*f->P[3][4] + t->Phi[72]*f->P[4][4] + t->Phi[73]*f->P[5][4] +
-            t->Phi[74]*f->P[6][4] + t->Phi[75]*f->P[8][4] + t->Phi[76]*f->P[9][4] +
-            t->Phi[77]*f->P[10][4] + t->Phi[78]*f->P[11][4] + t->Phi[79]*f->P[12][4] +
-            t->Phi[80]*f->P[13][4] + t->Phi[81]*f->P[14][4] + t->Phi[82]*f->P[15][4] +
-            t->Phi[83]*f->P[16][4] + t->Phi[84]*f->P[17][4];
-    w->M[5] = t->Phi[68]*f->P[0][5] + t->Phi[69]*f->P[1][5] + t->Phi[70]*f->P[2][5] +
-            t->Phi[71]*f->P[3][5] + t->Phi[72]*f->P[4][5] + t->Phi[73]*f->P[5][5] +
-            t->Phi[74]*f->P[6][5] + t->Phi[75]*f->P[8][5] + t->Phi[76]*f->P[9][5] +
-            t->Phi[77]*f->P[10][5] + t->Phi[78]*f->P[11][5] + t->Phi[79]*f->P[12][5] +
-            t->Phi[80]*f->P[13][5] + t->Phi[81]*f->P[14][5] + t->Phi[82]*f->P[15][5] +
-            t->Phi[83]*f->P[16][5] + t->Phi[84]*f->P[17][5];
-    w->M[6] = t->Phi[68]*f->P[0][6] + t->Phi[69]*f->P[1][6] + t->Phi[70]*f->P[2][6] +
-            t->Phi[71]*f->P[3][6] + t->Phi[72]*f->P[4][6] + t->Phi[73]*f->P[5][6] +
-            t->Phi[74]*f->P[6][6] + t->Phi[75]*f->P[8][6] + t->Phi[76]*f->P[9][6] +
-            t->Phi[77]*f->P[10][6] + t->Phi[78]*f->P[11][6] + t->Phi[79]*f->P[12][6] +
-            t->Phi[80]*f->P[13][6] + t->Phi[81]*f->P[14][6] + t->Phi[82]*f->P[15][6] +
-            t->Phi[83]*f->P[16][6] + t->Phi[84]*f->P[17][6];
-    w->M[7] = t->Phi[68]*f->P[0][7] + t->Phi[69]*f->P[1][7] + t->Phi[70]*f->P[2][7] +
-            t->Phi[71]*f->P[3][7] + t->Phi[72]*f->P[4][7] + t->Phi[73]*f->P[5][7] +
-            t->Phi[74]*f->P[6][7] + t->Phi[75]*f->P[8][7] + t->Phi[76]*f->P[9][7] +
-            t->Phi[77]*f->P[10][7] + t->Phi[78]*f->P[11][7] + t->Phi[79]*f->P[12][7] +
-            t->Phi[80]*f->P[13][7] + t->Phi[81]*f->P[14][7] + t->Phi[82]*f->P[15][7] +
-            t->Phi[83]*f->P[16][7] + t->Phi[84]*f->P[17][7];
-    w->M[8] = t->Phi[68]*f->P[0][8] + t->Phi[69]*f->P[1][8] + t->Phi[70]*f->P[2][8] +
-            t->Phi[71]*f->P[3][8] + t->Phi[72]*f->P[4][8] + t->Phi[73]*f->P[5][8] +
-            t->Phi[74]*f->P[6][8] + t->Phi[75]*f->P[8][8] + t->Phi[76]*f->P[9][8] +
-            t->Phi[77]*f->P[10][8] + t->Phi[78]*f->P[11][8] + t->Phi[79]*f->P[12][8] +
-            t->Phi[80]*f->P[13][8] + t->Phi[81]*f->P[14][8] + t->Phi[82]*f->P[15][8] +
-            t->Phi[83]*f->P[16][8] + t->Phi[84]*f->P[17][8];
-    w->M[9] = t->Phi[68]*f->P[0][9] + t->Phi[69]*f->P[1][9] + t->Phi[70]*f->P[2][9] +
-            t->Phi[71]*f->P[3][9] + t->Phi[72]*f->P[4][9] + t->Phi[73]*f->P[5][9] +
-            t->Phi[74]*f->P[6][9] + t->Phi[75]*f->P[8][9] + t->Phi[76]*f->P[9][9] +
-            t->Phi[77]*f->P[10][9] + t->Phi[78]*f->P[11][9] + t->Phi[79]*f->P[12][9] +
-            t->Phi[80]*f->P[13][9] + t->Phi[81]*f->P[14][9] + t->Phi[82]*f->P[15][9] +
-            t->Phi[83]*f->P[16][9] + t->Phi[84]*f->P[17][9];
-    w->M[10] = t->Phi[68]*f->P[0][10] + t->Phi[69]*f->P[1][10] + t->Phi[70]*f->P[2][10] +
-            t->Phi[71]*f->P[3][10] + t->Phi[72]*f->P[4][10] + t->Phi[73]*f->P[5][10] +
-            t->Phi[74]*f->P[6][10] + t->Phi[75]*f->P[8][10] + t->Phi[76]*f->P[9][10] +
-            t->Phi[77]*f->P[10][10] + t->Phi[78]*f->P[11][10] + t->Phi[79]*f->P[12][10] +
-            t->Phi[80]*f->P[13][10] + t->Phi[81]*f->P[14][10] + t->Phi[82]*f->P[15][10] +
-            t->Phi[83]*f->P[16][10] + t->Phi[84]*f->P[17][10];
-    w->M[11] = t->Phi[68]*f->P[0][11] + t->Phi[69]*f->P[1][11] + t->Phi[70]*f->P[2][11] +
-            t->Phi[71]*f->P[3][11] + t->Phi[72]*f->P[4][11] + t->Phi[73]*f->P[5][11] +
-            t->Phi[74]*f->P[6][11] + t->Phi[75]*f->P[8][11] + t->Phi[76]*f->P[9][11] +
-            t->Phi[77]*f->P[10][11] + t->Phi[78]*f->P[11][11] + t->Phi[79]*f->P[12][11] +
-            t->Phi[80]*f->P[13][11] + t->Phi[81]*f->P[14][11] + t->Phi[82]*f->P[15][11] +
-            t->Phi[83]*f->P[16][11] + t->Phi[84]*f->P[17][11];
-    w->M[12] = t->Phi[68]*f->P[0][12] + t->Phi[69]*f->P[1][12] + t->Phi[70]*f->P[2][12] +
-            t->Phi[71]*f->P[3][12] + t->Phi[72]*f->P[4][12] + t->Phi[73]*f->P[5][12] +
-            t->Phi[74]*f->P[6][12] + t->Phi[75]*f->P[8][12] + t->Phi[76]*f->P[9][12] +
-            t->Phi[77]*f->P[10][12] + t->Phi[78]*f->P[11][12] + t->Phi[79]*f->P[12][12] +
-            t->Phi[80]*f->P[13][12] + t->Phi[81]*f->P[14][12] + t->Phi[82]*f->P[15][12] +
-            t->Phi[83]*f->P[16][12] + t->Phi[84]*f->P[17][12];
-    w->M[13] = t->Phi[68]*f->P[0][13] + t->Phi[69]*f->P[1][13] + t->Phi[70]*f->P[2][13] +
-            t->Phi[71]*f->P[3][13] + t->Phi[72]*f->P[4][13] + t->Phi[73]*f->P[5][13] +
-            t->Phi[74]*f->P[6][13] + t->Phi[75]*f->P[8][13] + t->Phi[76]*f->P[9][13] +
-            t->Phi[77]*f->P[10][13] + t->Phi[78]*f->P[11][13] + t->Phi[79]*f->P[12][13] +
-            t->Phi[80]*f->P[13][13] + t->Phi[81]*f->P[14][13] + t->Phi[82]*f->P[15][13] +
-            t->Phi[83]*f->P[16][13] + t->Phi[84]*f->P[17][13];
-    w->M[14] = t->Phi[68]*f->P[0][14] + t->Phi[69]*f->P[1][14] + t->Phi[70]*f->P[2][14] +
-            t->Phi[71]*f->P[3][14] + t->Phi[72]*f->P[4][14] + t->Phi[73]*f->P[5][14] +
-            t->Phi[74]*f->P[6][14] + t->Phi[75]*f->P[8][14] + t->Phi[76]*f->P[9][14] +
-            t->Phi[77]*f->P[10][14] + t->Phi[78]*f->P[11][14] + t->Phi[79]*f->P[12][14] +
-            t->Phi[80]*f->P[13][14] + t->Phi[81]*f->P[14][14] + t->Phi[82]*f->P[15][14] +
-            t->Phi[83]*f->P[16][14] + t->Phi[84]*f->P[17][14];
-    w->M[15] = t->Phi[68]*f->P[0][15] + t->Phi[69]*f->P[1][15] + t->Phi[70]*f->P[2][15] +
-            t->Phi[71]*f->P[3][15] + t->Phi[72]*f->P[4][15] + t->Phi[73]*f->P[5][15] +
-            t->Phi[74]*f->P[6][15] + t->Phi[75]*f->P[8][15] + t->Phi[76]*f->P[9][15] +
-            t->Phi[77]*f->P[10][15] + t->Phi[78]*f->P[11][15] + t->Phi[79]*f->P[12][15] +
-            t->Phi[80]*f->P[13][15] + t->Phi[81]*f->P[14][15] + t->Phi[82]*f->P[15][15] +
-            t->Phi[83]*f->P[16][15] + t->Phi[84]*f->P[17][15];
-    w->M[16] = t->Phi[68]*f->P[0][16] + t->Phi[69]*f->P[1][16] + t->Phi[70]*f->P[2][16] +
-            t->Phi[71]*f->P[3][16] + t->Phi[72]*f->P[4][16] + t->Phi[73]*f->P[5][16] +
-            t->Phi[74]*f->P[6][16] + t->Phi[75]*f->P[8][16] + t->Phi[76]*f->P[9][16] +
-            t->Phi[77]*f->P[10][16] + t->Phi[78]*f->P[11][16] + t->Phi[79]*f->P[12][16] +
-            t->Phi[80]*f->P[13][16] + t->Phi[81]*f->P[14][16] + t->Phi[82]*f->P[15][16] +
-            t->Phi[83]*f->P[16][16] + t->Phi[84]*f->P[17][16];
-    w->M[17] = t->Phi[68]*f->P[0][17] + t->Phi[69]*f->P[1][17] + t->Phi[70]*f->P[2][17] +
-            t->Phi[71]*f->P[3][17] + t->Phi[72]*f->P[4][17] + t->Phi[73]*f->P[5][17] +
-            t->Phi[74]*f->P[6][17] + t->Phi[75]*f->P[8][17] + t->Phi[76]*f->P[9][17] +
-            t->Phi[77]*f->P[10][17] + t->Phi[78]*f->P[11][17] + t->Phi[79]*f->P[12][17] +
-            t->Phi[80]*f->P[13][17] + t->Phi[81]*f->P[14][17] + t->Phi[82]*f->P[15][17] +
-            t->Phi[83]*f->P[16][17] + t->Phi[84]*f->P[17][17];
+    int c;
+    lane_pair b[17];
+    b[0] = lane_pair_of(t->Phi[68], t->Phi[68]);
+    b[1] = lane_pair_of(t->Phi[69], t->Phi[69]);
+    b[2] = lane_pair_of(t->Phi[70], t->Phi[70]);
+    b[3] = lane_pair_of(t->Phi[71], t->Phi[71]);
+    b[4] = lane_pair_of(t->Phi[72], t->Phi[72]);
+    b[5] = lane_pair_of(t->Phi[73], t->Phi[73]);
+    b[6] = lane_pair_of(t->Phi[74], t->Phi[74]);
+    b[7] = lane_pair_of(t->Phi[75], t->Phi[75]);
+    b[8] = lane_pair_of(t->Phi[76], t->Phi[76]);
+    b[9] = lane_pair_of(t->Phi[77], t->Phi[77]);
+    b[10] = lane_pair_of(t->Phi[78], t->Phi[78]);
+    b[11] = lane_pair_of(t->Phi[79], t->Phi[79]);
+    b[12] = lane_pair_of(t->Phi[80], t->Phi[80]);
+    b[13] = lane_pair_of(t->Phi[81], t->Phi[81]);
+    b[14] = lane_pair_of(t->Phi[82], t->Phi[82]);
+    b[15] = lane_pair_of(t->Phi[83], t->Phi[83]);
+    b[16] = lane_pair_of(t->Phi[84], t->Phi[84]);
+    for (c = 0; c + 1 < 18; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[16][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[17][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -4331,114 +4183,45 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar propagate_row_4(const enu_doppler18_tra
 ENU_DOPPLER18_BLOCK void phi_times_p_row_5(const enu_doppler18_filter *restrict f, const
         enu_doppler18_transition *restrict t, enu_doppler18_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[85]*f->P[0][0] + t->Phi[86]*f->P[1][0] + t->Phi[87]*f->P[2][0] +
-            t->Phi[88]*f->P[3][0] + t->Phi[89]*f->P[4][0] + t->Phi[90]*f->P[5][0] +
-            t->Phi[91]*f->P[6][0] + t->Phi[92]*f->P[8][0] + t->Phi[93]*f->P[9][0] +
-            t->Phi[94]*f->P[10][0] + t->Phi[95]*f->P[11][0] + t->Phi[96]*f->P[12][0] +
-            t->Phi[97]*f->P[13][0] + t->Phi[98]*f->P[14][0] + t->Phi[99]*f->P[15][0] +
-            t->Phi[100]*f->P[16][0] + t->Phi[101]*f->P[17][0];
-    w->M[1] = t->Phi[85]*f->P[0][1] + t->Phi[86]*f->P[1][1] + t->Phi[87]*f->P[2][1] +
-            t->Phi[88]*f->P[3][1] + t->Phi[89]*f->P[4][1] + t->Phi[90]*f->P[5][1] +
-            t->Phi[91]*f->P[6][1] + t->Phi[92]*f->P[8][1] + t->Phi[93]*f->P[9][1] +
-            t->Phi[94]*f->P[10][1] + t->Phi[95]*f->P[11][1] + t->Phi[96]*f->P[12][1] +
-            t->Phi[97]*f->P[13][1] + t->Phi[98]*f->P[14][1] + t->Phi[99]*f->P[15][1] +
-            t->Phi[100]*f->P[16][1] + t->Phi[101]*f->P[17][1];
-    w->M[2] = t->Phi[85]*f->P[0][2] + t->Phi[86]*f->P[1][2] + t->Phi[87]*f->P[2][2] +
-            t->Phi[88]*f->P[3][2] + t->Phi[89]*f->P[4][2] + t->Phi[90]*f->P[5][2] +
-            t->Phi[91]*f->P[6][2] + t->Phi[92]*f->P[8][2] + t->Phi[93]*f->P[9][2] +
-            t->Phi[94]*f->P[10][2] + t->Phi[95]*f->P[11][2] + t->Phi[96]*f->P[12][2] +
-            t->Phi[97]*f->P[13][2] + t->Phi[98]*f->P[14][2] + t->Phi[99]*f->P[15][2] +
-            t->Phi[100]*f->P[16][2] + t->Phi[101]*f->P[17][2];
-    w->M[3] = t->Phi[85]*f->P[0][3] + t->Phi[86]*f->P[1][3] + t->Phi[87]*f->P[2][3] +
-            t->Phi[88]*f->P[3][3] + t->Phi[89]*f->P[4][3] + t->Phi[90]*f->P[5][3] +
-            t->Phi[91]*f->P[6][3] + t->Phi[92]*f->P[8][3] + t->Phi[93]*f->P[9][3] +
-            t->Phi[94]*f->P[10][3] + t->Phi[95]*f->P[11][3] + t->Phi[96]*f->P[12][3] +
-            t->Phi[97]*f->P[13][3] + t->Phi[98]*f->P[14][3] + t->Phi[99]*f->P[15][3] +
-            t->Phi[100]*f->P[16][3] + t->Phi[101]*f->P[17][3];
-    w->M[4] = t->Phi[85]*f->P[0][4] + t->Phi[86]*f->P[1][4] + t->Phi[87]*f->P[2][4] +
-            t->Phi[88]*f->P[3][4] + t->Phi[89]*f->P[4][4] + t->Phi[90]*f->P[5][4] +
-            t->Phi[91]*f->P[6][4] + t->Phi[92]*f->P[8][4] + t->Phi[93]*f->P[9][4] +
-            t->Phi[94]*f->P[10][4] + t->Phi[95]*f->P[11][4] + t->Phi[96]*f->P[12][4] +
-            t->Phi[97]*f->P[13][4] + t->Phi[98]*f->P[14][4] + t->Phi[99]*f->P[15][4] +
-            t->Phi[100]*f->P[16][4] + t->Phi[101]*f->P[17][4];
-    w->M[5] = t->Phi[85]*f->P[0][5] + t->Phi[86]*f->P[1][5] + t->Phi[87]*f->P[2][5] +
-            t->Phi[88]*f->P[3][5] + t->Phi[89]*f->P[4][5] + t->Phi[90]*f->P[5][5] +
-            t->Phi[91]*f->P[6][5] + t->Phi[92]*f->P[8][5] + t->Phi[93]*f->P[9][5] +
-            t->Phi[94]*f->P[10][5] + t->Phi[95]*f->P[11][5] + t->Phi[96]*f->P[12][5] +
-            t->Phi[97]*f->P[13][5] + t->Phi[98]*f->P[14][5] + t->Phi[99]*f->P[15][5] +
-            t->Phi[100]*f->P[16][5] + t->Phi[101]*f->P[17][5];
-    w->M[6] = t->Phi[85]*f->P[0][6] + t->Phi[86]*f->P[1][6] + t->Phi[87]*f->P[2][6] +
-            t->Phi[88]*f->P[3][6] + t->Phi[89]*f->P[4][6] + t->Phi[90]*f->P[5][6] +
-            t->Phi[91]*f->P[6][6] + t->Phi[92]*f->P[8][6] + t->Phi[93]*f->P[9][6] +
-            t->Phi[94]*f->P[10][6] + t->Phi[95]*f->P[11][6] + t->Phi[96]*f->P[12][6] +
-            t->Phi[97]*f->P[13][6] + t->Phi[98]*f->P[14][6] + t->Phi[99]*f->P[15][6] +
-            t->Phi[100]*f->P[16][6] + t->Phi[101]*f->P[17][6];
-    w->M[7] = t->Phi[85]*f->P[0][7] + t->Phi[86]*f->P[1][7] + t->Phi[87]*f->P[2][7] +
-            t->Phi[88]*f->P[3][7] + t->Phi[89]*f->P[4][7] + t->Phi[90]*f->P[5][7] +
-            t->Phi[91]*f->P[6][7] + t->Phi[92]*f->P[8][7] + t->Phi[93]*f->P[9][7] +
-            t->Phi[94]*f->P[10][7] + t->Phi[95]*f->P[11][7] + t->Phi[96]*f->P[12][7] +
-            t->Phi[97]*f->P[13][7] + t->Phi[98]*f->P[14][7] + t->Phi[99]*f->P[15][7] +
-            t->Phi[100]*f->P[16][7] + t->Phi[101]*f->P[17][7];
-    w->M[8] = t->Phi[85]*f->P[0][8] + t->Phi[86]*f->P[1][8] + t->Phi[87]*f->P[2][8] +
-            t->Phi[88]*f->P[3][8] + t->Phi[89]*f->P[4][8] + t->Phi[90]*f->P[5][8] +
-            t->Phi[91]*f->P[6][8] + t->Phi[92]*f->P[8][8] + t->Phi[93]*f->P[9][8] +
-            t->Phi[94]*f->P[10][8] + t->Phi[95]*f->P[11][8] + t->Phi[96]*f->P[12][8] +
-            t->Phi[97]*f->P[13][8] + t->Phi[98]*f->P[14][8] + t->Phi[99]*f->P[15][8] +
-            t->Phi[100]*f->P[16][8] + t->Phi[101]*f->P[17][8];
-    w->M[9] = t->Phi[85]*f->P[0][9] + t->Phi[86]*f->P[1][9] + t->Phi[87]*f->P[2][9] +
-            t->Phi[88]*f->P[3][9] + t->Phi[89]*f->P[4][9] + t->Phi[90]*f->P[5][9] +
-            t->Phi[91]*f->P[6][9] + t->Phi[92]*f->P[8][9] + t->Phi[93]*f->P[9][9] +
-            t->Phi[94]*f->P[10][9] + t->Phi[95]*f->P[11][9] + t->Phi[96]*f->P[12][9] +
-            t->Phi[97]*f->P[13][9] + t->Phi[98]*f->P[14][9] + t->Phi[99]*f->P[15][9] +
-            t->Phi[100]*f->P[16][9] + t->Phi[101]*f->P[17][9];
-    w->M[10] = t->Phi[85]*f->P[0][10] + t->Phi[86]*f->P[1][10] + t->Phi[87]*f->P[2][10] +
-            t->Phi[88]*f->P[3][10] + t->Phi[89]*f->P[4][10] + t->Phi[90]*f->P[5][10] +
-            t->Phi[91]*f->P[6][10] + t->Phi[92]*f->P[8][10] + t->Phi[93]*f->P[9][10] +
-            t->Phi[94]*f->P[10][10] + t->Phi[95]*f->P[11][10] + t->Phi[96]*f->P[12][10] +
-            t->Phi[97]*f->P[13][10] + t->Phi[98]*f->P[14][10] + t->Phi[99]*f->P[15][10] +
-            t->Phi[100]*f->P[16][10] + t->Phi[101]*f->P[17][10];
-    w->M[11] = t->Phi[85]*f->P[0][11] + t->Phi[86]*f->P[1][11] + t->Phi[87]*f->P[2][11] +
-            t->Phi[88]*f->P[3][11] + t->Phi[89]*f->P[4][11] + t->Phi[90]*f->P[5][11] +
-            t->Phi[91]*f->P[6][11] + t->Phi[92]*f->P[8][11] + t->Phi[93]*f->P[9][11] +
-            t->Phi[94]*f->P[10][11] + t->Phi[95]*f->P[11][11] + t->Phi[96]*f->P[12][11] +
-            t->Phi[97]*f->P[13][11] + t->Phi[98]*f->P[14][11] + t->Phi[99]*f->P[15][11] +
-            t->Phi[100]*f->P[16][11] + t->Phi[101]*f->P[17][11];
-    w->M[12] = t->Phi[85]*f->P[0][12] + t->Phi[86]*f->P[1][12] + t->Phi[87]*f->P[2][12] +
-            t->Phi[88]*f->P[3][12] + t->Phi[89]*f->P[4][12] + t->Phi[90]*f->P[5][12] +
-            t->Phi[91]*f->P[6][12] + t->Phi[92]*f->P[8][12] + t->Phi[93]*f->P[9][12] +
-            t->Phi[94]*f->P[10][12] + t->Phi[95]*f->P[11][12] + t->Phi[96]*f->P[12][12] +
-            t->Phi[97]*f->P[13][12] + t->Phi[98]*f->P[14][12] + t->Phi[99]*f->P[15][12] +
-            t->Phi[100]*f->P[16][12] + t->Phi[101]*f->P[17][12];
-    w->M[13] = t->Phi[85]*f->P[0][13] + t->Phi[86]*f->P[1][13] + t->Phi[87]*f->P[2][13] +
-            t->Phi[88]*f->P[3][13] + t->Phi[89]*f->P[4][13] + t->Phi[90]*f->P[5][13] +
-            t->Phi[91]*f->P[6][13] + t->Phi[92]*f->P[8][13] + t->Phi[93]*f->P[9][13] +
-            t->Phi[94]*f->P[10][13] + t->Phi[95]*f->P[11][13] + t->Phi[96]*f->P[12][13] +
-            t->Phi[97]*f->P[13][13] + t->Phi[98]*f->P[14][13] + t->Phi[99]*f->P[15][13] +
-            t->Phi[100]*f->P[16][13] + t->Phi[101]*f->P[17][13];
-    w->M[14] = t->Phi[85]*f->P[0][14] + t->Phi[86]*f->P[1][14] + t->Phi[87]*f->P[2][14] +
-            t->Phi[88]*f->P[3][14] + t->Phi[89]*f->P[4][14] + t->Phi[90]*f->P[5][14] +
-            t->Phi[91]*f->P[6][14] + t->Phi[92]*f->P[8][14] + t->Phi[93]*f->P[9][14] +
-            t->Phi[94]*f->P[10][14] + t->Phi[95]*f->P[11][14] + t->Phi[96]*f->P[12][14] +
-            t->Phi[97]*f->P[13][14] + t->Phi[98]*f->P[14][14] + t->Phi[99]*f->P[15][14] +
-            t->Phi[100]*f->P[16][14] + t->Phi[101]*f->P[17][14];
-    w->M[15] = t->Phi[85]*f->P[0][15] + t->Phi[86]*f->P[1][15] + t->Phi[87]*f->P[2][15] +
-            t->Phi[88]*f->P[3][15] + t->Phi[89]*f->P[4][15] + t->Phi[90]*f->P[5][15] +
-            t->Phi[91]*f->P[6][15] + t->Phi[92]*f->P[8][15] + t->Phi[93]*f->P[9][15] +
-            t->Phi[94]*f->P[10][15] + t->Phi[95]*f->P[11][15] + t->Phi[96]*f->P[12][15] +
-            t->Phi[97]*f->P[13][15] + t->Phi[98]*f->P[14][15] + t->Phi[99]*f->P[15][15] +
-            t->Phi[100]*f->P[16][15] + t->Phi[101]*f->P[17][15];
-    w->M[16] = t->Phi[85]*f->P[0][16] + t->Phi[86]*f->P[1][16] + t->Phi[87]*f->P[2][16] +
-            t->Phi[88]*f->P[3][16] + t->Phi[89]*f->P[4][16] + t->Phi[90]*f->P[5][16] +
-            t->Phi[91]*f->P[6][16] + t->Phi[92]*f->P[8][16] + t->Phi[93]*f->P[9][16] +
-            t->Phi[94]*f->P[10][16] + t->Phi[95]*f->P[11][16] + t->Phi[96]*f->P[12][16] +
-            t->Phi[97]*f->P[13][16] + t->Phi[98]*f->P[14][16] + t->Phi[99]*f->P[15][16] +
-            t->Phi[100]*f->P[16][16] + t->Phi[101]*f->P[17][16];
-    w->M[17] = t->Phi[85]*f->P[0][17] + t->Phi[86]*f->P[1][17] + t->Phi[87]*f->P[2][17] +
-            t->Phi[88]*f->P[3][17] + t->Phi[89]*f->P[4][17] + t->Phi[90]*f->P[5][17] +
-            t->Phi[91]*f->P[6][17] + t->Phi[92]*f->P[8][17] + t->Phi[93]*f->P[9][17] +
-            t->Phi[94]*f->P[10][17] + t->Phi[95]*f->P[11][17] + t->Phi[96]*f->P[12][17] +
-            t->Phi[97]*f->P[13][17] + t->Phi[98]*f->P[14][17] + t->Phi[99]*f->P[15][17] +
-            t->Phi[100]*f->P[16][17] + t->Phi[101]*f->P[17][17];
+    int c;
+    lane_pair b[17];
+    b[0] = lane_pair_of(t->Phi[85], t->Phi[85]);
+    b[1] = lane_pair_of(t->Phi[86], t->Phi[86]);
+    b[2] = lane_pair_of(t->Phi[87], t->Phi[87]);
+    b[3] = lane_pair_of(t->Phi[88], t->Phi[88]);
+    b[4] = lane_pair_of(t->Phi[89], t->Phi[89]);
+    b[5] = lane_pair_of(t->Phi[90], t->Phi[90]);
+    b[6] = lane_pair_of(t->Phi[91], t->Phi[91]);
+    b[7] = lane_pair_of(t->Phi[92], t->Phi[92]);
+    b[8] = lane_pair_of(t->Phi[93], t->Phi[93]);
+    b[9] = lane_pair_of(t->Phi[94], t->Phi[94]);
+    b[10] = lane_pair_of(t->Phi[95], t->Phi[95]);
+    b[11] = lane_pair_of(t->Phi[96], t->Phi[96]);
+    b[12] = lane_pair_of(t->Phi[97], t->Phi[97]);
+    b[13] = lane_pair_of(t->Phi[98], t->Phi[98]);
+    b[14] = lane_pair_of(t->Phi[99], t->Phi[99]);
+    b[15] = lane_pair_of(t->Phi[100], t->Phi[100]);
+    b[16] = lane_pair_of(t->Phi[101], t->Phi[101]);
+    for (c = 0; c + 1 < 18; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[16][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[17][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -4500,114 +4283,45 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar propagate_row_5(const enu_doppler18_tra
 ENU_DOPPLER18_BLOCK void phi_times_p_row_6(const enu_doppler18_filter *restrict f, const
         enu_doppler18_transition *restrict t, enu_doppler18_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[102]*f->P[0][0] + t->Phi[103]*f->P[1][0] + t->Phi[104]*f->P[2][0] +
-            t->Phi[105]*f->P[3][0] + t->Phi[106]*f->P[4][0] + t->Phi[107]*f->P[5][0] +
-            t->Phi[108]*f->P[6][0] + t->Phi[109]*f->P[8][0] + t->Phi[110]*f->P[9][0] +
-            t->Phi[111]*f->P[10][0] + t->Phi[112]*f->P[11][0] + t->Phi[113]*f->P[12][0] +
-            t->Phi[114]*f->P[13][0] + t->Phi[115]*f->P[14][0] + t->Phi[116]*f->P[15][0] +
-            t->Phi[117]*f->P[16][0] + t->Phi[118]*f->P[17][0];
-    w->M[1] = t->Phi[102]*f->P[0][1] + t->Phi[103]*f->P[1][1] + t->Phi[104]*f->P[2][1] +
-            t->Phi[105]*f->P[3][1] + t->Phi[106]*f->P[4][1] + t->Phi[107]*f->P[5][1] +
-            t->Phi[108]*f->P[6][1] + t->Phi[109]*f->P[8][1] + t->Phi[110]*f->P[9][1] +
-            t->Phi[111]*f->P[10][1] + t->Phi[112]*f->P[11][1] + t->Phi[113]*f->P[12][1] +
-            t->Phi[114]*f->P[13][1] + t->Phi[115]*f->P[14][1] + t->Phi[116]*f->P[15][1] +
-            t->Phi[117]*f->P[16][1] + t->Phi[118]*f->P[17][1];
-    w->M[2] = t->Phi[102]*f->P[0][2] + t->Phi[103]*f->P[1][2] + t->Phi[104]*f->P[2][2] +
-            t->Phi[105]*f->P[3][2] + t->Phi[106]*f->P[4][2] + t->Phi[107]*f->P[5][2] +
-            t->Phi[108]*f->P[6][2] + t->Phi[109]*f->P[8][2] + t->Phi[110]*f->P[9][2] +
-            t->Phi[111]*f->P[10][2] + t->Phi[112]*f->P[11][2] + t->Phi[113]*f->P[12][2] +
-            t->Phi[114]*f->P[13][2] + t->Phi[115]*f->P[14][2] + t->Phi[116]*f->P[15][2] +
-            t->Phi[117]*f->P[16][2] + t->Phi[118]*f->P[17][2];
-    w->M[3] = t->Phi[102]*f->P[0][3] + t->Phi[103]*f->P[1][3] + t->Phi[104]*f->P[2][3] +
-            t->Phi[105]*f->P[3][3] + t->Phi[106]*f->P[4][3] + t->Phi[107]*f->P[5][3] +
-            t->Phi[108]*f->P[6][3] + t->Phi[109]*f->P[8][3] + t->Phi[110]*f->P[9][3] +
-            t->Phi[111]*f->P[10][3] + t->Phi[112]*f->P[11][3] + t->Phi[113]*f->P[12][3] +
-            t->Phi[114]*f->P[13][3] + t->Phi[115]*f->P[14][3] + t->Phi[116]*f->P[15][3] +
-            t->Phi[117]*f->P[16][3] + t->Phi[118]*f->P[17][3];
-    w->M[4] = t->Phi[102]*f->P[0][4] + t->Phi[103]*f->P[1][4] + t->Phi[104]*f->P[2][4] +
-            t->Phi[105]*f->P[3][4] + t->Phi[106]*f->P[4][4] + t->Phi[107]*f->P[5][4] +
-            t->Phi[108]*f->P[6][4] + t->Phi[109]*f->P[8][4] + t->Phi[110]*f->P[9][4] +
-            t->Phi[111]*f->P[10][4] + t->Phi[112]*f->P[11][4] + t->Phi[113]*f->P[12][4] +
-            t->Phi[114]*f->P[13][4] + t->Phi[115]*f->P[14][4] + t->Phi[116]*f->P[15][4] +
-            t->Phi[117]*f->P[16][4] + t->Phi[118]*f->P[17][4];
-    w->M[5] = t->Phi[102]*f->P[0][5] + t->Phi[103]*f->P[1][5] + t->Phi[104]*f->P[2][5] +
-            t->Phi[105]*f->P[3][5] + t->Phi[106]*f->P[4][5] + t->Phi[107]*f->P[5][5] +
-            t->Phi[108]*f->P[6][5] + t->Phi[109]*f->P[8][5] + t->Phi[110]*f->P[9][5] +
-            t->Phi[111]*f->P[10][5] + t->Phi[112]*f->P[11][5] + t->Phi[113]*f->P[12][5] +
-            t->Phi[114]*f->P[13][5] + t->Phi[115]*f->P[14][5] + t->Phi[116]*f->P[15][5] +
-            t->Phi[117]*f->P[16][5] + t->Phi[118]*f->P[17][5];
-    w->M[6] = t->Phi[102]*f->P[0][6] + t->Phi[103]*f->P[1][6] + t->Phi[104]*f->P[2][6] +
-            t->Phi[105]*f->P[3][6] + t->Phi[106]*f->P[4][6] + t->Phi[107]*f->P[5][6] +
-            t->Phi[108]*f->P[6][6] + t->Phi[109]*f->P[8][6] + t->Phi[110]*f->P[9][6] +
-            t->Phi[111]*f->P[10][6] + t->Phi[112]*f->P[11][6] + t->Phi[113]*f->P[12][6] +
-            t->Phi[114]*f->P[13][6] + t->Phi[115]*f->P[14][6] + t->Phi[116]*f->P[15][6] +
-            t->Phi[117]*f->P[16][6] + t->Phi[118]*f->P[17][6];
-    w->M[7] = t->Phi[102]*f->P[0][7] + t->Phi[103]*f->P[1][7] + t->Phi[104]*f->P[2][7] +
-            t->Phi[105]*f->P[3][7] + t->Phi[106]*f->P[4][7] + t->Phi[107]*f->P[5][7] +
-            t->Phi[108]*f->P[6][7] + t->Phi[109]*f->P[8][7] + t->Phi[110]*f->P[9][7] +
-            t->Phi[111]*f->P[10][7] + t->Phi[112]*f->P[11][7] + t->Phi[113]*f->P[12][7] +
-            t->Phi[114]*f->P[13][7] + t->Phi[115]*f->P[14][7] + t->Phi[116]*f->P[15][7] +
-            t->Phi[117]*f->P[16][7] + t->Phi[118]*f->P[17][7];
-    w->M[8] = t->Phi[102]*f->P[0][8] + t->Phi[103]*f->P[1][8] + t->Phi[104]*f->P[2][8] +
-            t->Phi[105]*f->P[3][8] + t->Phi[106]*f->P[4][8] + t->Phi[107]*f->P[5][8] +
-            t->Phi[108]*f->P[6][8] + t->Phi[109]*f->P[8][8] + t->Phi[110]*f->P[9][8] +
-            t->Phi[111]*f->P[10][8] + t->Phi[112]*f->P[11][8] + t->Phi[113]*f->P[12][8] +
-            t->Phi[114]*f->P[13][8] + t->Phi[115]*f->P[14][8] + t->Phi[116]*f->P[15][8] +
-            t->Phi[117]*f->P[16][8] + t->Phi[118]*f->P[17][8];
-    w->M[9] = t->Phi[102]*f->P[0][9] + t->Phi[103]*f->P[1][9] + t->Phi[104]*f->P[2][9] +
-            t->Phi[105]*f->P[3][9] + t->Phi[106]*f->P[4][9] + t->Phi[107]*f->P[5][9] +
-            t->Phi[108]*f->P[6][9] + t->Phi[109]*f->P[8][9] + t->Phi[110]*f->P[9][9] +
-            t->Phi[111]*f->P[10][9] + t->Phi[112]*f->P[11][9] + t->Phi[113]*f->P[12][9] +
-            t->Phi[114]*f->P[13][9] + t->Phi[115]*f->P[14][9] + t->Phi[116]*f->P[15][9] +
-            t->Phi[117]*f->P[16][9] + t->Phi[118]*f->P[17][9];
-    w->M[10] = t->Phi[102]*f->P[0][10] + t->Phi[103]*f->P[1][10] + t->Phi[104]*f->P[2][10] +
-            t->Phi[105]*f->P[3][10] + t->Phi[106]*f->P[4][10] + t->Phi[107]*f->P[5][10] +
-            t->Phi[108]*f->P[6][10] + t->Phi[109]*f->P[8][10] + t->Phi[110]*f->P[9][10] +
-            t->Phi[111]*f->P[10][10] + t->Phi[112]*f->P[11][10] + t->Phi[113]*f->P[12][10] +
-            t->Phi[114]*f->P[13][10] + t->Phi[115]*f->P[14][10] + t->Phi[116]*f->P[15][10] +
-            t->Phi[117]*f->P[16][10] + t->Phi[118]*f->P[17][10];
-    w->M[11] = t->Phi[102]*f->P[0][11] + t->Phi[103]*f->P[1][11] + t->Phi[104]*f->P[2][11] +
-            t->Phi[105]*f->P[3][11] + t->Phi[106]*f->P[4][11] + t->Phi[107]*f->P[5][11] +
-            t->Phi[108]*f->P[6][11] + t->Phi[109]*f->P[8][11] + t->Phi[110]*f->P[9][11] +
-            t->Phi[111]*f->P[10][11] + t->Phi[112]*f->P[11][11] + t->Phi[113]*f->P[12][11] +
-            t->Phi[114]*f->P[13][11] + t->Phi[115]*f->P[14][11] + t->Phi[116]*f->P[15][11] +
-            t->Phi[117]*f->P[16][11] + t->Phi[118]*f->P[17][11];
-    w->M[12] = t->Phi[102]*f->P[0][12] + t->Phi[103]*f->P[1][12] + t->Phi[104]*f->P[2][12] +
-            t->Phi[105]*f->P[3][12] + t->Phi[106]*f->P[4][12] + t->Phi[107]*f->P[5][12] +
-            t->Phi[108]*f->P[6][12] + t->Phi[109]*f->P[8][12] + t->Phi[110]*f->P[9][12] +
-            t->Phi[111]*f->P[10][12] + t->Phi[112]*f->P[11][12] + t->Phi[113]*f->P[12][12] +
-            t->Phi[114]*f->P[13][12] + t->Phi[115]*f->P[14][12] + t->Phi[116]*f->P[15][12] +
-            t->Phi[117]*f->P[16][12] + t->Phi[118]*f->P[17][12];
-    w->M[13] = t->Phi[102]*f->P[0][13] + t->Phi[103]*f->P[1][13] + t->Phi[104]*f->P[2][13] +
-            t->Phi[105]*f->P[3][13] + t->Phi[106]*f->P[4][13] + t->Phi[107]*f->P[5][13] +
-            t->Phi[108]*f->P[6][13] + t->Phi[109]*f->P[8][13] + t->Phi[110]*f->P[9][13] +
-            t->Phi[111]*f->P[10][13] + t->Phi[112]*f->P[11][13] + t->Phi[113]*f->P[12][13] +
-            t->Phi[114]*f->P[13][13] + t->Phi[115]*f->P[14][13] + t->Phi[116]*f->P[15][13] +
-            t->Phi[117]*f->P[16][13] + t->Phi[118]*f->P[17][13];
-    w->M[14] = t->Phi[102]*f->P[0][14] + t->Phi[103]*f->P[1][14] + t->Phi[104]*f->P[2][14] +
-            t->Phi[105]*f->P[3][14] + t->Phi[106]*f->P[4][14] + t->Phi[107]*f->P[5][14] +
-            t->Phi[108]*f->P[6][14] + t->Phi[109]*f->P[8][14] + t->Phi[110]*f->P[9][14] +
-            t->Phi[111]*f->P[10][14] + t->Phi[112]*f->P[11][14] + t->Phi[113]*f->P[12][14] +
-            t->Phi[114]*f->P[13][14] + t->Phi[115]*f->P[14][14] + t->Phi[116]*f->P[15][14] +
-            t->Phi[117]*f->P[16][14] + t->Phi[118]*f->P[17][14];
-    w->M[15] = t->Phi[102]*f->P[0][15] + t->Phi[103]*f->P[1][15] + t->Phi[104]*f->P[2][15] +
-            t->Phi[105]*f->P[3][15] + t->Phi[106]*f->P[4][15] + t->Phi[107]*f->P[5][15] +
-            t->Phi[108]*f->P[6][15] + t->Phi[109]*f->P[8][15] + t->Phi[110]*f->P[9][15] +
-            t->Phi[111]*f->P[10][15] + t->Phi[112]*f->P[11][15] + t->Phi[113]*f->P[12][15] +
-            t->Phi[114]*f->P[13][15] + t->Phi[115]*f->P[14][15] + t->Phi[116]*f->P[15][15] +
-            t->Phi[117]*f->P[16][15] + t->Phi[118]*f->P[17][15];
-    w->M[16] = t->Phi[102]*f->P[0][16] + t->Phi[103]*f->P[1][16] + t->Phi[104]*f->P[2][16] +
-            t->Phi[105]*f->P[3][16] + t->Phi[106]*f->P[4][16] + t->Phi[107]*f->P[5][16] +
-            t->Phi[108]*f->P[6][16] + t->Phi[109]*f->P[8][16] + t->Phi[110]*f->P[9][16] +
-            t->Phi[111]*f->P[10][16] + t->Phi[112]*f->P[11][16] + t->Phi[113]*f->P[12][16] +
-            t->Phi[114]*f->P[13][16] + t->Phi[115]*f->P[14][16] + t->Phi[116]*f->P[15][16] +
-            t->Phi[117]*f->P[16][16] + t->Phi[118]*f->P[17][16];
-    w->M[17] = t->Phi[102]*f->P[0][17] + t->Phi[103]*f->P[1][17] + t->Phi[104]*f->P[2][17] +
-            t->Phi[105]*f->P[3][17] + t->Phi[106]*f->P[4][17] + t->Phi[107]*f->P[5][17] +
-            t->Phi[108]*f->P[6][17] + t->Phi[109]*f->P[8][17] + t->Phi[110]*f->P[9][17] +
-            t->Phi[111]*f->P[10][17] + t->Phi[112]*f->P[11][17] + t->Phi[113]*f->P[12][17] +
-            t->Phi[114]*f->P[13][17] + t->Phi[115]*f->P[14][17] + t->Phi[116]*f->P[15][17] +
-            t->Phi[117]*f->P[16][17] + t->Phi[118]*f->P[17][17];
+    int c;
+    lane_pair b[17];
+    b[0] = lane_pair_of(t->Phi[102], t->Phi[102]);
+    b[1] = lane_pair_of(t->Phi[103], t->Phi[103]);
+    b[2] = lane_pair_of(t->Phi[104], t->Phi[104]);
+    b[3] = lane_pair_of(t->Phi[105], t->Phi[105]);
+    b[4] = lane_pair_of(t->Phi[106], t->Phi[106]);
+    b[5] = lane_pair_of(t->Phi[107], t->Phi[107]);
+    b[6] = lane_pair_of(t->Phi[108], t->Phi[108]);
+    b[7] = lane_pair_of(t->Phi[109], t->Phi[109]);
+    b[8] = lane_pair_of(t->Phi[110], t->Phi[110]);
+    b[9] = lane_pair_of(t->Phi[111], t->Phi[111]);
+    b[10] = lane_pair_of(t->Phi[112], t->Phi[112]);
+    b[11] = lane_pair_of(t->Phi[113], t->Phi[113]);
+    b[12] = lane_pair_of(t->Phi[114], t->Phi[114]);
+    b[13] = lane_pair_of(t->Phi[115], t->Phi[115]);
+    b[14] = lane_pair_of(t->Phi[116], t->Phi[116]);
+    b[15] = lane_pair_of(t->Phi[117], t->Phi[117]);
+    b[16] = lane_pair_of(t->Phi[118], t->Phi[118]);
+    for (c = 0; c + 1 < 18; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[16][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[17][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -4660,114 +4374,47 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar propagate_row_6(const enu_doppler18_tra
 ENU_DOPPLER18_BLOCK void phi_times_p_row_7(const enu_doppler18_filter *restrict f, const
         enu_doppler18_transition *restrict t, enu_doppler18_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[119]*f->P[0][0] + t->Phi[120]*f->P[1][0] + t->Phi[121]*f->P[2][0] +
-            t->Phi[122]*f->P[3][0] + t->Phi[123]*f->P[4][0] + t->Phi[124]*f->P[5][0] +
-            t->Phi[125]*f->P[6][0] + t->Phi[126]*f->P[7][0] + t->Phi[127]*f->P[8][0] +
-            t->Phi[128]*f->P[9][0] + t->Phi[129]*f->P[10][0] + t->Phi[130]*f->P[11][0] +
-            t->Phi[131]*f->P[12][0] + t->Phi[132]*f->P[13][0] + t->Phi[133]*f->P[14][0] +
-            t->Phi[134]*f->P[15][0] + t->Phi[135]*f->P[16][0] + t->Phi[136]*f->P[17][0];
-    w->M[1] = t->Phi[119]*f->P[0][1] + t->Phi[120]*f->P[1][1] + t->Phi[121]*f->P[2][1] +
-            t->Phi[122]*f->P[3][1] + t->Phi[123]*f->P[4][1] + t->Phi[124]*f->P[5][1] +
-            t->Phi[125]*f->P[6][1] + t->Phi[126]*f->P[7][1] + t->Phi[127]*f->P[8][1] +
-            t->Phi[128]*f->P[9][1] + t->Phi[129]*f->P[10][1] + t->Phi[130]*f->P[11][1] +
-            t->Phi[131]*f->P[12][1] + t->Phi[132]*f->P[13][1] + t->Phi[133]*f->P[14][1] +
-            t->Phi[134]*f->P[15][1] + t->Phi[135]*f->P[16][1] + t->Phi[136]*f->P[17][1];
-    w->M[2] = t->Phi[119]*f->P[0][2] + t->Phi[120]*f->P[1][2] + t->Phi[121]*f->P[2][2] +
-            t->Phi[122]*f->P[3][2] + t->Phi[123]*f->P[4][2] + t->Phi[124]*f->P[5][2] +
-            t->Phi[125]*f->P[6][2] + t->Phi[126]*f->P[7][2] + t->Phi[127]*f->P[8][2] +
-            t->Phi[128]*f->P[9][2] + t->Phi[129]*f->P[10][2] + t->Phi[130]*f->P[11][2] +
-            t->Phi[131]*f->P[12][2] + t->Phi[132]*f->P[13][2] + t->Phi[133]*f->P[14][2] +
-            t->Phi[134]*f->P[15][2] + t->Phi[135]*f->P[16][2] + t->Phi[136]*f->P[17][2];
-    w->M[3] = t->Phi[119]*f->P[0][3] + t->Phi[120]*f->P[1][3] + t->Phi[121]*f->P[2][3] +
-            t->Phi[122]*f->P[3][3] + t->Phi[123]*f->P[4][3] + t->Phi[124]*f->P[5][3] +
-            t->Phi[125]*f->P[6][3] + t->Phi[126]*f->P[7][3] + t->Phi[127]*f->P[8][3] +
-            t->Phi[128]*f->P[9][3] + t->Phi[129]*f->P[10][3] + t->Phi[130]*f->P[11][3] +
-            t->Phi[131]*f->P[12][3] + t->Phi[132]*f->P[13][3] + t->Phi[133]*f->P[14][3] +
-            t->Phi[134]*f->P[15][3] + t->Phi[135]*f->P[16][3] + t->Phi[136]*f->P[17][3];
-    w->M[4] = t->Phi[119]*f->P[0][4] + t->Phi[120]*f->P[1][4] + t->Phi[121]*f->P[2][4] +
-            t->Phi[122]*f->P[3][4] + t->Phi[123]*f->P[4][4] + t->Phi[124]*f->P[5][4] +
-            t->Phi[125]*f->P[6][4] + t->Phi[126]*f->P[7][4] + t->Phi[127]*f->P[8][4] +
-            t->Phi[128]*f->P[9][4] + t->Phi[129]*f->P[10][4] + t->Phi[130]*f->P[11][4] +
-            t->Phi[131]*f->P[12][4] + t->Phi[132]*f->P[13][4] + t->Phi[133]*f->P[14][4] +
-            t->Phi[134]*f->P[15][4] + t->Phi[135]*f->P[16][4] + t->Phi[136]*f->P[17][4];
-    w->M[5] = t->Phi[119]*f->P[0][5] + t->Phi[120]*f->P[1][5] + t->Phi[121]*f->P[2][5] +
-            t->Phi[122]*f->P[3][5] + t->Phi[123]*f->P[4][5] + t->Phi[124]*f->P[5][5] +
-            t->Phi[125]*f->P[6][5] + t->Phi[126]*f->P[7][5] + t->Phi[127]*f->P[8][5] +
-            t->Phi[128]*f->P[9][5] + t->Phi[129]*f->P[10][5] + t->Phi[130]*f->P[11][5] +
-            t->Phi[131]*f->P[12][5] + t->Phi[132]*f->P[13][5] + t->Phi[133]*f->P[14][5] +
-            t->Phi[134]*f->P[15][5] + t->Phi[135]*f->P[16][5] + t->Phi[136]*f->P[17][5];
-    w->M[6] = t->Phi[119]*f->P[0][6] + t->Phi[120]*f->P[1][6] + t->Phi[121]*f->P[2][6] +
-            t->Phi[122]*f->P[3][6] + t->Phi[123]*f->P[4][6] + t->Phi[124]*f->P[5][6] +
-            t->Phi[125]*f->P[6][6] + t->Phi[126]*f->P[7][6] + t->Phi[127]*f->P[8][6] +
-            t->Phi[128]*f->P[9][6] + t->Phi[129]*f->P[10][6] + t->Phi[130]*f->P[11][6] +
-            t->Phi[131]*f->P[12][6] + t->Phi[132]*f->P[13][6] + t->Phi[133]*f->P[14][6] +
-            t->Phi[134]*f->P[15][6] + t->Phi[135]*f->P[16][6] + t->Phi[136]*f->P[17][6];
-    w->M[7] = t->Phi[119]*f->P[0][7] + t->Phi[120]*f->P[1][7] + t->Phi[121]*f->P[2][7] +
-            t->Phi[122]*f->P[3][7] + t->Phi[123]*f->P[4][7] + t->Phi[124]*f->P[5][7] +
-            t->Phi[125]*f->P[6][7] + t->Phi[126]*f->P[7][7] + t->Phi[127]*f->P[8][7] +
-            t->Phi[128]*f->P[9][7] + t->Phi[129]*f->P[10][7] + t->Phi[130]*f->P[11][7] +
-            t->Phi[131]*f->P[12][7] + t->Phi[132]*f->P[13][7] + t->Phi[133]*f->P[14][7] +
-            t->Phi[134]*f->P[15][7] + t->Phi[135]*f->P[16][7] + t->Phi[136]*f->P[17][7];
-    w->M[8] = t->Phi[119]*f->P[0][8] + t->Phi[120]*f->P[1][8] + t->Phi[121]*f->P[2][8] +
-            t->Phi[122]*f->P[3][8] + t->Phi[123]*f->P[4][8] + t->Phi[124]*f->P[5][8] +
-            t->Phi[125]*f->P[6][8] + t->Phi[126]*f->P[7][8] + t->Phi[127]*f->P[8][8] +
-            t->Phi[128]*f->P[9][8] + t->Phi[129]*f->P[10][8] + t->Phi[130]*f->P[11][8] +
-            t->Phi[131]*f->P[12][8] + t->Phi[132]*f->P[13][8] + t->Phi[133]*f->P[14][8] +
-            t->Phi[134]*f->P[15][8] + t->Phi[135]*f->P[16][8] + t->Phi[136]*f->P[17][8];
-    w->M[9] = t->Phi[119]*f->P[0][9] + t->Phi[120]*f->P[1][9] + t->Phi[121]*f->P[2][9] +
-            t->Phi[122]*f->P[3][9] + t->Phi[123]*f->P[4][9] + t->Phi[124]*f->P[5][9] +
-            t->Phi[125]*f->P[6][9] + t->Phi[126]*f->P[7][9] + t->Phi[127]*f->P[8][9] +
-            t->Phi[128]*f->P[9][9] + t->Phi[129]*f->P[10][9] + t->Phi[130]*f->P[11][9] +
-            t->Phi[131]*f->P[12][9] + t->Phi[132]*f->P[13][9] + t->Phi[133]*f->P[14][9] +
-            t->Phi[134]*f->P[15][9] + t->Phi[135]*f->P[16][9] + t->Phi[136]*f->P[17][9];
-    w->M[10] = t->Phi[119]*f->P[0][10] + t->Phi[120]*f->P[1][10] + t->Phi[121]*f->P[2][10] +
-            t->Phi[122]*f->P[3][10] + t->Phi[123]*f->P[4][10] + t->Phi[124]*f->P[5][10] +
-            t->Phi[125]*f->P[6][10] + t->Phi[126]*f->P[7][10] + t->Phi[127]*f->P[8][10] +
-            t->Phi[128]*f->P[9][10] + t->Phi[129]*f->P[10][10] + t->Phi[130]*f->P[11][10] +
-            t->Phi[131]*f->P[12][10] + t->Phi[132]*f->P[13][10] + t->Phi[133]*f->P[14][10] +
-            t->Phi[134]*f->P[15][10] + t->Phi[135]*f->P[16][10] + t->Phi[136]*f->P[17][10];
-    w->M[11] = t->Phi[119]*f->P[0][11] + t->Phi[120]*f->P[1][11] + t->Phi[121]*f->P[2][11] +
-            t->Phi[122]*f->P[3][11] + t->Phi[123]*f->P[4][11] + t->Phi[124]*f->P[5][11] +
-            t->Phi[125]*f->P[6][11] + t->Phi[126]*f->P[7][11] + t->Phi[127]*f->P[8][11] +
-            t->Phi[128]*f->P[9][11] + t->Phi[129]*f->P[10][11] + t->Phi[130]*f->P[11][11] +
-            t->Phi[131]*f->P[12][11] + t->Phi[132]*f->P[13][11] + t->Phi[133]*f->P[14][11] +
-            t->Phi[134]*f->P[15][11] + t->Phi[135]*f->P[16][11] + t->Phi[136]*f->P[17][11];
-    w->M[12] = t->Phi[119]*f->P[0][12] + t->Phi[120]*f->P[1][12] + t->Phi[121]*f->P[2][12] +
-            t->Phi[122]*f->P[3][12] + t->Phi[123]*f->P[4][12] + t->Phi[124]*f->P[5][12] +
-            t->Phi[125]*f->P[6][12] + t->Phi[126]*f->P[7][12] + t->Phi[127]*f->P[8][12] +
-            t->Phi[128]*f->P[9][12] + t->Phi[129]*f->P[10][12] + t->Phi[130]*f->P[11][12] +
-            t->Phi[131]*f->P[12][12] + t->Phi[132]*f->P[13][12] + t->Phi[133]*f->P[14][12] +
-            t->Phi[134]*f->P[15][12] + t->Phi[135]*f->P[16][12] + t->Phi[136]*f->P[17][12];
-    w->M[13] = t->Phi[119]*f->P[0][13] + t->Phi[120]*f->P[1][13] + t->Phi[121]*f->P[2][13] +
-            t->Phi[122]*f->P[3][13] + t->Phi[123]*f->P[4][13] + t->Phi[124]*f->P[5][13] +
-            t->Phi[125]*f->P[6][13] + t->Phi[126]*f->P[7][13] + t->Phi[127]*f->P[8][13] +
-            t->Phi[128]*f->P[9][13] + t->Phi[129]*f->P[10][13] + t->Phi[130]*f->P[11][13] +
-            t->Phi[131]*f->P[12][13] + t->Phi[132]*f->P[13][13] + t->Phi[133]*f->P[14][13] +
-            t->Phi[134]*f->P[15][13] + t->Phi[135]*f->P[16][13] + t->Phi[136]*f->P[17][13];
-    w->M[14] = t->Phi[119]*f->P[0][14] + t->Phi[120]*f->P[1][14] + t->Phi[121]*f->P[2][14] +
-            t->Phi[122]*f->P[3][14] + t->Phi[123]*f->P[4][14] + t->Phi[124]*f->P[5][14] +
-            t->Phi[125]*f->P[6][14] + t->Phi[126]*f->P[7][14] + t->Phi[127]*f->P[8][14] +
-            t->Phi[128]*f->P[9][14] + t->Phi[129]*f->P[10][14] + t->Phi[130]*f->P[11][14] +
-            t->Phi[131]*f->P[12][14] + t->Phi[132]*f->P[13][14] + t->Phi[133]*f->P[14][14] +
-            t->Phi[134]*f->P[15][14] + t->Phi[135]*f->P[16][14] + t->Phi[136]*f->P[17][14];
-    w->M[15] = t->Phi[119]*f->P[0][15] + t->Phi[120]*f->P[1][15] + t->Phi[121]*f->P[2][15] +
-            t->Phi[122]*f->P[3][15] + t->Phi[123]*f->P[4][15] + t->Phi[124]*f->P[5][15] +
-            t->Phi[125]*f->P[6][15] + t->Phi[126]*f->P[7][15] + t->Phi[127]*f->P[8][15] +
-            t->Phi[128]*f->P[9][15] + t->Phi[129]*f->P[10][15] + t->Phi[130]*f->P[11][15] +
-            t->Phi[131]*f->P[12][15] + t->Phi[132]*f->P[13][15] + t->Phi[133]*f->P[14][15] +
-            t->Phi[134]*f->P[15][15] + t->Phi[135]*f->P[16][15] + t->Phi[136]*f->P[17][15];
-    w->M[16] = t->Phi[119]*f->P[0][16] + t->Phi[120]*f->P[1][16] + t->Phi[121]*f->P[2][16] +
-            t->Phi[122]*f->P[3][16] + t->Phi[123]*f->P[4][16] + t->Phi[124]*f->P[5][16] +
-            t->Phi[125]*f->P[6][16] + t->Phi[126]*f->P[7][16] + t->Phi[127]*f->P[8][16] +
-            t->Phi[128]*f->P[9][16] + t->Phi[129]*f->P[10][16] + t->Phi[130]*f->P[11][16] +
-            t->Phi[131]*f->P[12][16] + t->Phi[132]*f->P[13][16] + t->Phi[133]*f->P[14][16] +
-            t->Phi[134]*f->P[15][16] + t->Phi[135]*f->P[16][16] + t->Phi[136]*f->P[17][16];
-    w->M[17] = t->Phi[119]*f->P[0][17] + t->Phi[120]*f->P[1][17] + t->Phi[121]*f->P[2][17] +
-            t->Phi[122]*f->P[3][17] + t->Phi[123]*f->P[4][17] + t->Phi[124]*f->P[5][17] +
-            t->Phi[125]*f->P[6][17] + t->Phi[126]*f->P[7][17] + t->Phi[127]*f->P[8][17] +
-            t->Phi[128]*f->P[9][17] + t->Phi[129]*f->P[10][17] + t->Phi[130]*f->P[11][17] +
-            t->Phi[131]*f->P[12][17] + t->Phi[132]*f->P[13][17] + t->Phi[133]*f->P[14][17] +
-            t->Phi[134]*f->P[15][17] + t->Phi[135]*f->P[16][17] + t->Phi[136]*f->P[17][17];
+    int c;
+    lane_pair b[18];
+    b[0] = lane_pair_of(t->Phi[119], t->Phi[119]);
+    b[1] = lane_pair_of(t->Phi[120], t->Phi[120]);
+    b[2] = lane_pair_of(t->Phi[121], t->Phi[121]);
+    b[3] = lane_pair_of(t->Phi[122], t->Phi[122]);
+    b[4] = lane_pair_of(t->Phi[123], t->Phi[123]);
+    b[5] = lane_pair_of(t->Phi[124], t->Phi[124]);
+    b[6] = lane_pair_of(t->Phi[125], t->Phi[125]);
+    b[7] = lane_pair_of(t->Phi[126], t->Phi[126]);
+    b[8] = lane_pair_of(t->Phi[127], t->Phi[127]);
+    b[9] = lane_pair_of(t->Phi[128], t->Phi[128]);
+    b[10] = lane_pair_of(t->Phi[129], t->Phi[129]);
+    b[11] = lane_pair_of(t->Phi[130], t->Phi[130]);
+    b[12] = lane_pair_of(t->Phi[131], t->Phi[131]);
+    b[13] = lane_pair_of(t->Phi[132], t->Phi[132]);
+    b[14] = lane_pair_of(t->Phi[133], t->Phi[133]);
+    b[15] = lane_pair_of(t->Phi[134], t->Phi[134]);
+    b[16] = lane_pair_of(t->Phi[135], t->Phi[135]);
+    b[17] = lane_pair_of(t->Phi[136], t->Phi[136]);
+    for (c = 0; c + 1 < 18; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[16][c]));
+        acc = lane_pair_add_product(acc, b[17], lane_pair_load(&f->P[17][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -4811,114 +4458,45 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar propagate_row_7(const enu_doppler18_tra
 ENU_DOPPLER18_BLOCK void phi_times_p_row_8(const enu_doppler18_filter *restrict f, const
         enu_doppler18_transition *restrict t, enu_doppler18_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[137]*f->P[0][0] + t->Phi[138]*f->P[1][0] + t->Phi[139]*f->P[2][0] +
-            t->Phi[140]*f->P[3][0] + t->Phi[141]*f->P[4][0] + t->Phi[142]*f->P[5][0] +
-            t->Phi[143]*f->P[6][0] + t->Phi[144]*f->P[8][0] + t->Phi[145]*f->P[9][0] +
-            t->Phi[146]*f->P[10][0] + t->Phi[147]*f->P[11][0] + t->Phi[148]*f->P[12][0] +
-            t->Phi[149]*f->P[13][0] + t->Phi[150]*f->P[14][0] + t->Phi[151]*f->P[15][0] +
-            t->Phi[152]*f->P[16][0] + t->Phi[153]*f->P[17][0];
-    w->M[1] = t->Phi[137]*f->P[0][1] + t->Phi[138]*f->P[1][1] + t->Phi[139]*f->P[2][1] +
-            t->Phi[140]*f->P[3][1] + t->Phi[141]*f->P[4][1] + t->Phi[142]*f->P[5][1] +
-            t->Phi[143]*f->P[6][1] + t->Phi[144]*f->P[8][1] + t->Phi[145]*f->P[9][1] +
-            t->Phi[146]*f->P[10][1] + t->Phi[147]*f->P[11][1] + t->Phi[148]*f->P[12][1] +
-            t->Phi[149]*f->P[13][1] + t->Phi[150]*f->P[14][1] + t->Phi[151]*f->P[15][1] +
-            t->Phi[152]*f->P[16][1] + t->Phi[153]*f->P[17][1];
-    w->M[2] = t->Phi[137]*f->P[0][2] + t->Phi[138]*f->P[1][2] + t->Phi[139]*f->P[2][2] +
-            t->Phi[140]*f->P[3][2] + t->Phi[141]*f->P[4][2] + t->Phi[142]*f->P[5][2] +
-            t->Phi[143]*f->P[6][2] + t->Phi[144]*f->P[8][2] + t->Phi[145]*f->P[9][2] +
-            t->Phi[146]*f->P[10][2] + t->Phi[147]*f->P[11][2] + t->Phi[148]*f->P[12][2] +
-            t->Phi[149]*f->P[13][2] + t->Phi[150]*f->P[14][2] + t->Phi[151]*f->P[15][2] +
-            t->Phi[152]*f->P[16][2] + t->Phi[153]*f->P[17][2];
-    w->M[3] = t->Phi[137]*f->P[0][3] + t->Phi[138]*f->P[1][3] + t->Phi[139]*f->P[2][3] +
-            t->Phi[140]*f->P[3][3] + t->Phi[141]*f->P[4][3] + t->Phi[142]*f->P[5][3] +
-            t->Phi[143]*f->P[6][3] + t->Phi[144]*f->P[8][3] + t->Phi[145]*f->P[9][3] +
-            t->Phi[146]*f->P[10][3] + t->Phi[147]*f->P[11][3] + t->Phi[148]*f->P[12][3] +
-            t->Phi[149]*f->P[13][3] + t->Phi[150]*f->P[14][3] + t->Phi[151]*f->P[15][3] +
-            t->Phi[152]*f->P[16][3] + t->Phi[153]*f->P[17][3];
-    w->M[4] = t->Phi[137]*f->P[0][4] + t->Phi[138]*f->P[1][4] + t->Phi[139]*f->P[2][4] +
-            t->Phi[140]*f->P[3][4] + t->Phi[141]*f->P[4][4] + t->Phi[142]*f->P[5][4] +
-            t->Phi[143]*f->P[6][4] + t->Phi[144]*f->P[8][4] + t->Phi[145]*f->P[9][4] +
-            t->Phi[146]*f->P[10][4] + t->Phi[147]*f->P[11][4] + t->Phi[148]*f->P[12][4] +
-            t->Phi[149]*f->P[13][4] + t->Phi[150]*f->P[14][4] + t->Phi[151]*f->P[15][4] +
-            t->Phi[152]*f->P[16][4] + t->Phi[153]*f->P[17][4];
-    w->M[5] = t->Phi[137]*f->P[0][5] + t->Phi[138]*f->P[1][5] + t->Phi[139]*f->P[2][5] +
-            t->Phi[140]*f->P[3][5] + t->Phi[141]*f->P[4][5] + t->Phi[142]*f->P[5][5] +
-            t->Phi[143]*f->P[6][5] + t->Phi[144]*f->P[8][5] + t->Phi[145]*f->P[9][5] +
-            t->Phi[146]*f->P[10][5] + t->Phi[147]*f->P[11][5] + t->Phi[148]*f->P[12][5] +
-            t->Phi[149]*f->P[13][5] + t->Phi[150]*f->P[14][5] + t->Phi[151]*f->P[15][5] +
-            t->Phi[152]*f->P[16][5] + t->Phi[153]*f->P[17][5];
-    w->M[6] = t->Phi[137]*f->P[0][6] + t->Phi[138]*f->P[1][6] + t->Phi[139]*f->P[2][6] +
-            t->Phi[140]*f->P[3][6] + t->Phi[141]*f->P[4][6] + t->Phi[142]*f->P[5][6] +
-            t->Phi[143]*f->P[6][6] + t->Phi[144]*f->P[8][6] + t->Phi[145]*f->P[9][6] +
-            t->Phi[146]*f->P[10][6] + t->Phi[147]*f->P[11][6] + t->Phi[148]*f->P[12][6] +
-            t->Phi[149]*f->P[13][6] + t->Phi[150]*f->P[14][6] + t->Phi[151]*f->P[15][6] +
-            t->Phi[152]*f->P[16][6] + t->Phi[153]*f->P[17][6];
-    w->M[7] = t->Phi[137]*f->P[0][7] + t->Phi[138]*f->P[1][7] + t->Phi[139]*f->P[2][7] +
-            t->Phi[140]*f->P[3][7] + t->Phi[141]*f->P[4][7] + t->Phi[142]*f->P[5][7] +
-            t->Phi[143]*f->P[6][7] + t->Phi[144]*f->P[8][7] + t->Phi[145]*f->P[9][7] +
-            t->Phi[146]*f->P[10][7] + t->Phi[147]*f->P[11][7] + t->Phi[148]*f->P[12][7] +
-            t->Phi[149]*f->P[13][7] + t->Phi[150]*f->P[14][7] + t->Phi[151]*f->P[15][7] +
-            t->Phi[152]*f->P[16][7] + t->Phi[153]*f->P[17][7];
-    w->M[8] = t->Phi[137]*f->P[0][8] + t->Phi[138]*f->P[1][8] + t->Phi[139]*f->P[2][8] +
-            t->Phi[140]*f->P[3][8] + t->Phi[141]*f->P[4][8] + t->Phi[142]*f->P[5][8] +
-            t->Phi[143]*f->P[6][8] + t->Phi[144]*f->P[8][8] + t->Phi[145]*f->P[9][8] +
-            t->Phi[146]*f->P[10][8] + t->Phi[147]*f->P[11][8] + t->Phi[148]*f->P[12][8] +
-            t->Phi[149]*f->P[13][8] + t->Phi[150]*f->P[14][8] + t->Phi[151]*f->P[15][8] +
-            t->Phi[152]*f->P[16][8] + t->Phi[153]*f->P[17][8];
-    w->M[9] = t->Phi[137]*f->P[0][9] + t->Phi[138]*f->P[1][9] + t->Phi[139]*f->P[2][9] +
-            t->Phi[140]*f->P[3][9] + t->Phi[141]*f->P[4][9] + t->Phi[142]*f->P[5][9] +
-            t->Phi[143]*f->P[6][9] + t->Phi[144]*f->P[8][9] + t->Phi[145]*f->P[9][9] +
-            t->Phi[146]*f->P[10][9] + t->Phi[147]*f->P[11][9] + t->Phi[148]*f->P[12][9] +
-            t->Phi[149]*f->P[13][9] + t->Phi[150]*f->P[14][9] + t->Phi[151]*f->P[15][9] +
-            t->Phi[152]*f->P[16][9] + t->Phi[153]*f->P[17][9];
-    w->M[10] = t->Phi[137]*f->P[0][10] + t->Phi[138]*f->P[1][10] + t->Phi[139]*f->P[2][10] +
-            t->Phi[140]*f->P[3][10] + t->Phi[141]*f->P[4][10] + t->Phi[142]*f->P[5][10] +
-            t->Phi[143]*f->P[6][10] + t->Phi[144]*f->P[8][10] + t->Phi[145]*f->P[9][10] +
-            t->Phi[146]*f->P[10][10] + t->Phi[147]*f->P[11][10] + t->Phi[148]*f->P[12][10] +
-            t->Phi[149]*f->P[13][10] + t->Phi[150]*f->P[14][10] + t->Phi[151]*f->P[15][10] +
-            t->Phi[152]*f->P[16][10] + t->Phi[153]*f->P[17][10];
-    w->M[11] = t->Phi[137]*f->P[0][11] + t->Phi[138]*f->P[1][11] + t->Phi[139]*f->P[2][11] +
-            t->Phi[140]*f->P[3][11] + t->Phi[141]*f->P[4][11] + t->Phi[142]*f->P[5][11] +
-            t->Phi[143]*f->P[6][11] + t->Phi[144]*f->P[8][11] + t->Phi[145]*f->P[9][11] +
-            t->Phi[146]*f->P[10][11] + t->Phi[147]*f->P[11][11] + t->Phi[148]*f->P[12][11] +
-            t->Phi[149]*f->P[13][11] + t->Phi[150]*f->P[14][11] + t->Phi[151]*f->P[15][11] +
-            t->Phi[152]*f->P[16][11] + t->Phi[153]*f->P[17][11];
-    w->M[12] = t->Phi[137]*f->P[0][12] + t->Phi[138]*f->P[1][12] + t->Phi[139]*f->P[2][12] +
-            t->Phi[140]*f->P[3][12] + t->Phi[141]*f->P[4][12] + t->Phi[142]*f->P[5][12] +
-            t->Phi[143]*f->P[6][12] + t->Phi[144]*f->P[8][12] + t->Phi[145]*f->P[9][12] +
-            t->Phi[146]*f->P[10][12] + t->Phi[147]*f->P[11][12] + t->Phi[148]*f->P[12][12] +
-            t->Phi[149]*f->P[13][12] + t->Phi[150]*f->P[14][12] + t->Phi[151]*f->P[15][12] +
-            t->Phi[152]*f->P[16][12] + t->Phi[153]*f->P[17][12];
-    w->M[13] = t->Phi[137]*f->P[0][13] + t->Phi[138]*f->P[1][13] + t->Phi[139]*f->P[2][13] +
-            t->Phi[140]*f->P[3][13] + t->Phi[141]*f->P[4][13] + t->Phi[142]*f->P[5][13] +
-            t->Phi[143]*f->P[6][13] + t->Phi[144]*f->P[8][13] + t->Phi[145]*f->P[9][13] +
-            t->Phi[146]*f->P[10][13] + t->Phi[147]*f->P[11][13] + t->Phi[148]*f->P[12][13] +
-            t->Phi[149]*f->P[13][13] + t->Phi[150]*f->P[14][13] + t->Phi[151]*f->P[15][13] +
-            t->Phi[152]*f->P[16][13] + t->Phi[153]*f->P[17][13];
-    w->M[14] = t->Phi[137]*f->P[0][14] + t->Phi[138]*f->P[1][14] + t->Phi[139]*f->P[2][14] +
-            t->Phi[140]*f->P[3][14] + t->Phi[141]*f->P[4][14] + t->Phi[142]*f->P[5][14] +
-            t->Phi[143]*f->P[6][14] + t->Phi[144]*f->P[8][14] + t->Phi[145]*f->P[9][14] +
-            t->Phi[146]*f->P[10][14] + t->Phi[147]*f->P[11][14] + t->Phi[148]*f->P[12][14] +
-            t->Phi[149]*f->P[13][14] + t->Phi[150]*f->P[14][14] + t->Phi[151]*f->P[15][14] +
-            t->Phi[152]*f->P[16][14] + t->Phi[153]*f->P[17][14];
-    w->M[15] = t->Phi[137]*f->P[0][15] + t->Phi[138]*f->P[1][15] + t->Phi[139]*f->P[2][15] +
-            t->Phi[140]*f->P[3][15] + t->Phi[141]*f->P[4][15] + t->Phi[142]*f->P[5][15] +
-            t->Phi[143]*f->P[6][15] + t->Phi[144]*f->P[8][15] + t->Phi[145]*f->P[9][15] +
-            t->Phi[146]*f->P[10][15] + t->Phi[147]*f->P[11][15] + t->Phi[148]*f->P[12][15] +
-            t->Phi[149]*f->P[13][15] + t->Phi[150]*f->P[14][15] + t->Phi[151]*f->P[15][15] +
-            t->Phi[152]*f->P[16][15] + t->Phi[153]*f->P[17][15];
-    w->M[16] = t->Phi[137]*f->P[0][16] + t->Phi[138]*f->P[1][16] + t->Phi[139]*f->P[2][16] +
-            t->Phi[140]*f->P[3][16] + t->Phi[141]*f->P[4][16] + t->Phi[142]*f->P[5][16] +
-            t->Phi[143]*f->P[6][16] + t->Phi[144]*f->P[8][16] + t->Phi[145]*f->P[9][16] +
-            t->Phi[146]*f->P[10][16] + t->Phi[147]*f->P[11][16] + t->Phi[148]*f->P[12][16] +
-            t->Phi[149]*f->P[13][16] + t->Phi[150]*f->P[14][16] + t->Phi[151]*f->P[15][16] +
-            t->Phi[152]*f->P[16][16] + t->Phi[153]*f->P[17][16];
-    w->M[17] = t->Phi[137]*f->P[0][17] + t->Phi[138]*f->P[1][17] + t->Phi[139]*f->P[2][17] +
-            t->Phi[140]*f->P[3][17] + t->Phi[141]*f->P[4][17] + t->Phi[142]*f->P[5][17] +
-            t->Phi[143]*f->P[6][17] + t->Phi[144]*f->P[8][17] + t->Phi[145]*f->P[9][17] +
-            t->Phi[146]*f->P[10][17] + t->Phi[147]*f->P[11][17] + t->Phi[148]*f->P[12][17] +
-            t->Phi[149]*f->P[13][17] + t->Phi[150]*f->P[14][17] + t->Phi[151]*f->P[15][17] +
-            t->Phi[152]*f->P[16][17] + t->Phi[153]*f->P[17][17];
+    int c;
+    lane_pair b[17];
+    b[0] = lane_pair_of(t->Phi[137], t->Phi[137]);
+    b[1] = lane_pair_of(t->Phi[138], t->Phi[138]);
+    b[2] = lane_pair_of(t->Phi[139], t->Phi[139]);
+    b[3] = lane_pair_of(t->Phi[140], t->Phi[140]);
+    b[4] = lane_pair_of(t->Phi[141], t->Phi[141]);
+    b[5] = lane_pair_of(t->Phi[142], t->Phi[142]);
+    b[6] = lane_pair_of(t->Phi[143], t->Phi[143]);
+    b[7] = lane_pair_of(t->Phi[144], t->Phi[144]);
+    b[8] = lane_pair_of(t->Phi[145], t->Phi[145]);
+    b[9] = lane_pair_of(t->Phi[146], t->Phi[146]);
+    b[10] = lane_pair_of(t->Phi[147], t->Phi[147]);
+    b[11] = lane_pair_of(t->Phi[148], t->Phi[148]);
+    b[12] = lane_pair_of(t->Phi[149], t->Phi[149]);
+    b[13] = lane_pair_of(t->Phi[150], t->Phi[150]);
+    b[14] = lane_pair_of(t->Phi[151], t->Phi[151]);
+    b[15] = lane_pair_of(t->Phi[152], t->Phi[152]);
+    b[16] = lane_pair_of(t->Phi[153], t->Phi[153]);
+    for (c = 0; c + 1 < 18; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[16][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[17][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -4955,9 +4533,6 @@ static enu_doppler18_scalar propagate_row_9(const enu_doppler18_filter *restrict
         enu_doppler18_transition *restrict t, enu_doppler18_filter_scratch *restrict w)
 {
     enu_doppler18_scalar v, check = 0.0;
-    v = f->P[9][9]; w->Pn[126] = v; check += v;
-    v = f->P[9][10]; w->Pn[127] = v; check += v;
-    v = f->P[9][11]; w->Pn[128] = v; check += v;
     v = f->P[9][12]*t->Phi[157]; w->Pn[129] = v; check += v;
     v = f->P[9][13]*t->Phi[158]; w->Pn[130] = v; check += v;
     v = f->P[9][14]*t->Phi[159]; w->Pn[131] = v; check += v;
@@ -4973,8 +4548,6 @@ static enu_doppler18_scalar propagate_row_10(const enu_doppler18_filter *restric
         enu_doppler18_transition *restrict t, enu_doppler18_filter_scratch *restrict w)
 {
     enu_doppler18_scalar v, check = 0.0;
-    v = f->P[10][10]; w->Pn[135] = v; check += v;
-    v = f->P[10][11]; w->Pn[136] = v; check += v;
     v = f->P[10][12]*t->Phi[157]; w->Pn[137] = v; check += v;
     v = f->P[10][13]*t->Phi[158]; w->Pn[138] = v; check += v;
     v = f->P[10][14]*t->Phi[159]; w->Pn[139] = v; check += v;
@@ -4990,7 +4563,6 @@ static enu_doppler18_scalar propagate_row_11(const enu_doppler18_filter *restric
         enu_doppler18_transition *restrict t, enu_doppler18_filter_scratch *restrict w)
 {
     enu_doppler18_scalar v, check = 0.0;
-    v = f->P[11][11]; w->Pn[143] = v; check += v;
     v = f->P[11][12]*t->Phi[157]; w->Pn[144] = v; check += v;
     v = f->P[11][13]*t->Phi[158]; w->Pn[145] = v; check += v;
     v = f->P[11][14]*t->Phi[159]; w->Pn[146] = v; check += v;
@@ -5303,10 +4875,61 @@ int enu_doppler18_predict(enu_doppler18_filter *restrict f, const enu_doppler18_
     phi_times_p_row_17(f, t, w);
     sum_check += propagate_row_17(t, w);
     /* a row's sum that is not finite: a value that is not, or an overflow of finite values */
-    if (sum_check != 0.0) {
+    if (sum_check != 0.0) { /* the entries of Pn computed (the kept pairs are not) */
         int e;
         sum_check = 0.0;
-        for (e = 0; e < ENU_DOPPLER18_N_PACKED; ++e) {
+        for (e = 0; e < 18; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 18; e < 35; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 35; e < 51; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 51; e < 66; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 66; e < 80; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 80; e < 93; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 93; e < 105; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 105; e < 116; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 116; e < 126; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 129; e < 135; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 137; e < 143; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 144; e < 150; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 150; e < 156; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 156; e < 161; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 161; e < 165; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 165; e < 168; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 168; e < 170; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 170; e < 171; ++e) {
             sum_check += w->Pn[e] - w->Pn[e];
         }
     }
@@ -5456,24 +5079,21 @@ int enu_doppler18_predict(enu_doppler18_filter *restrict f, const enu_doppler18_
     f->P[15][8] = f->P[8][15];
     f->P[16][8] = f->P[8][16];
     f->P[17][8] = f->P[8][17];
-    memcpy(&f->P[9][9], &w->Pn[126], 9 * sizeof w->Pn[0]);
-    f->P[10][9] = f->P[9][10];
-    f->P[11][9] = f->P[9][11];
+    memcpy(&f->P[9][12], &w->Pn[129], 6 * sizeof w->Pn[0]);
     f->P[12][9] = f->P[9][12];
     f->P[13][9] = f->P[9][13];
     f->P[14][9] = f->P[9][14];
     f->P[15][9] = f->P[9][15];
     f->P[16][9] = f->P[9][16];
     f->P[17][9] = f->P[9][17];
-    memcpy(&f->P[10][10], &w->Pn[135], 8 * sizeof w->Pn[0]);
-    f->P[11][10] = f->P[10][11];
+    memcpy(&f->P[10][12], &w->Pn[137], 6 * sizeof w->Pn[0]);
     f->P[12][10] = f->P[10][12];
     f->P[13][10] = f->P[10][13];
     f->P[14][10] = f->P[10][14];
     f->P[15][10] = f->P[10][15];
     f->P[16][10] = f->P[10][16];
     f->P[17][10] = f->P[10][17];
-    memcpy(&f->P[11][11], &w->Pn[143], 7 * sizeof w->Pn[0]);
+    memcpy(&f->P[11][12], &w->Pn[144], 6 * sizeof w->Pn[0]);
     f->P[12][11] = f->P[11][12];
     f->P[13][11] = f->P[11][13];
     f->P[14][11] = f->P[11][14];

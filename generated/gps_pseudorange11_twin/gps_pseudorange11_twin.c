@@ -1141,14 +1141,22 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void process_noise(const gps_pseudorange11_twin_mat
         gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_discretize_scratch
         *restrict w, const gps_pseudorange11_twin_scalar T)
 {
-    w->term[1][48] = T*m->q[0];
-    w->term[1][49] = T*m->q[1];
-    w->term[1][50] = T*m->q[2];
-    w->term[1][51] = T*m->q[3];
-    w->term[1][52] = T*m->q[4];
-    w->term[1][53] = T*m->q[5];
-    w->term[1][54] = T*m->q[6];
-    w->term[1][55] = T*m->q[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[0]));
+        lane_pair_store(&w->term[1][48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[2]));
+        lane_pair_store(&w->term[1][50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[4]));
+        lane_pair_store(&w->term[1][52], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[6]));
+        lane_pair_store(&w->term[1][54], pair);
+    }
     w->term[1][0] = w->term[0][0]*w->term[1][48];
     w->term[1][1] = w->term[0][1]*w->term[1][49];
     w->term[1][2] = w->term[0][2]*w->term[1][50];
@@ -1781,36 +1789,29 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void phi_times_p_row_0(const gps_pseudorange11_twin
         const gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[0]*f->P[0][0] + t->Phi[1]*f->P[1][0] + t->Phi[2]*f->P[2][0] +
-            t->Phi[3]*f->P[3][0] + t->Phi[4]*f->P[4][0] + t->Phi[5]*f->P[5][0] +
-            t->Phi[6]*f->P[6][0] + t->Phi[7]*f->P[7][0] + t->Phi[8]*f->P[8][0];
-    w->M[1] = t->Phi[0]*f->P[0][1] + t->Phi[1]*f->P[1][1] + t->Phi[2]*f->P[2][1] +
-            t->Phi[3]*f->P[3][1] + t->Phi[4]*f->P[4][1] + t->Phi[5]*f->P[5][1] +
-            t->Phi[6]*f->P[6][1] + t->Phi[7]*f->P[7][1] + t->Phi[8]*f->P[8][1];
-    w->M[2] = t->Phi[0]*f->P[0][2] + t->Phi[1]*f->P[1][2] + t->Phi[2]*f->P[2][2] +
-            t->Phi[3]*f->P[3][2] + t->Phi[4]*f->P[4][2] + t->Phi[5]*f->P[5][2] +
-            t->Phi[6]*f->P[6][2] + t->Phi[7]*f->P[7][2] + t->Phi[8]*f->P[8][2];
-    w->M[3] = t->Phi[0]*f->P[0][3] + t->Phi[1]*f->P[1][3] + t->Phi[2]*f->P[2][3] +
-            t->Phi[3]*f->P[3][3] + t->Phi[4]*f->P[4][3] + t->Phi[5]*f->P[5][3] +
-            t->Phi[6]*f->P[6][3] + t->Phi[7]*f->P[7][3] + t->Phi[8]*f->P[8][3];
-    w->M[4] = t->Phi[0]*f->P[0][4] + t->Phi[1]*f->P[1][4] + t->Phi[2]*f->P[2][4] +
-            t->Phi[3]*f->P[3][4] + t->Phi[4]*f->P[4][4] + t->Phi[5]*f->P[5][4] +
-            t->Phi[6]*f->P[6][4] + t->Phi[7]*f->P[7][4] + t->Phi[8]*f->P[8][4];
-    w->M[5] = t->Phi[0]*f->P[0][5] + t->Phi[1]*f->P[1][5] + t->Phi[2]*f->P[2][5] +
-            t->Phi[3]*f->P[3][5] + t->Phi[4]*f->P[4][5] + t->Phi[5]*f->P[5][5] +
-            t->Phi[6]*f->P[6][5] + t->Phi[7]*f->P[7][5] + t->Phi[8]*f->P[8][5];
-    w->M[6] = t->Phi[0]*f->P[0][6] + t->Phi[1]*f->P[1][6] + t->Phi[2]*f->P[2][6] +
-            t->Phi[3]*f->P[3][6] + t->Phi[4]*f->P[4][6] + t->Phi[5]*f->P[5][6] +
-            t->Phi[6]*f->P[6][6] + t->Phi[7]*f->P[7][6] + t->Phi[8]*f->P[8][6];
-    w->M[7] = t->Phi[0]*f->P[0][7] + t->Phi[1]*f->P[1][7] + t->Phi[2]*f->P[2][7] +
-            t->Phi[3]*f->P[3][7] + t->Phi[4]*f->P[4][7] + t->Phi[5]*f->P[5][7] +
-            t->Phi[6]*f->P[6][7] + t->Phi[7]*f->P[7][7] + t->Phi[8]*f->P[8][7];
-    w->M[8] = t->Phi[0]*f->P[0][8] + t->Phi[1]*f->P[1][8] + t->Phi[2]*f->P[2][8] +
-            t->Phi[3]*f->P[3][8] + t->Phi[4]*f->P[4][8] + t->Phi[5]*f->P[5][8] +
-            t->Phi[6]*f->P[6][8] + t->Phi[7]*f->P[7][8] + t->Phi[8]*f->P[8][8];
-    w->M[9] = t->Phi[0]*f->P[0][9] + t->Phi[1]*f->P[1][9] + t->Phi[2]*f->P[2][9] +
-            t->Phi[3]*f->P[3][9] + t->Phi[4]*f->P[4][9] + t->Phi[5]*f->P[5][9] +
-            t->Phi[6]*f->P[6][9] + t->Phi[7]*f->P[7][9] + t->Phi[8]*f->P[8][9];
+    int c;
+    lane_pair b[9];
+    b[0] = lane_pair_of(t->Phi[0], t->Phi[0]);
+    b[1] = lane_pair_of(t->Phi[1], t->Phi[1]);
+    b[2] = lane_pair_of(t->Phi[2], t->Phi[2]);
+    b[3] = lane_pair_of(t->Phi[3], t->Phi[3]);
+    b[4] = lane_pair_of(t->Phi[4], t->Phi[4]);
+    b[5] = lane_pair_of(t->Phi[5], t->Phi[5]);
+    b[6] = lane_pair_of(t->Phi[6], t->Phi[6]);
+    b[7] = lane_pair_of(t->Phi[7], t->Phi[7]);
+    b[8] = lane_pair_of(t->Phi[8], t->Phi[8]);
+    for (c = 0; c + 1 < 11; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[8][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[10] = t->Phi[0]*f->P[0][10] + t->Phi[1]*f->P[1][10] + t->Phi[2]*f->P[2][10] +
             t->Phi[3]*f->P[3][10] + t->Phi[4]*f->P[4][10] + t->Phi[5]*f->P[5][10] +
             t->Phi[6]*f->P[6][10] + t->Phi[7]*f->P[7][10] + t->Phi[8]*f->P[8][10];
@@ -1869,36 +1870,29 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void phi_times_p_row_1(const gps_pseudorange11_twin
         const gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[9]*f->P[0][0] + t->Phi[10]*f->P[1][0] + t->Phi[11]*f->P[2][0] +
-            t->Phi[12]*f->P[3][0] + t->Phi[13]*f->P[4][0] + t->Phi[14]*f->P[5][0] +
-            t->Phi[15]*f->P[6][0] + t->Phi[16]*f->P[7][0] + t->Phi[17]*f->P[8][0];
-    w->M[1] = t->Phi[9]*f->P[0][1] + t->Phi[10]*f->P[1][1] + t->Phi[11]*f->P[2][1] +
-            t->Phi[12]*f->P[3][1] + t->Phi[13]*f->P[4][1] + t->Phi[14]*f->P[5][1] +
-            t->Phi[15]*f->P[6][1] + t->Phi[16]*f->P[7][1] + t->Phi[17]*f->P[8][1];
-    w->M[2] = t->Phi[9]*f->P[0][2] + t->Phi[10]*f->P[1][2] + t->Phi[11]*f->P[2][2] +
-            t->Phi[12]*f->P[3][2] + t->Phi[13]*f->P[4][2] + t->Phi[14]*f->P[5][2] +
-            t->Phi[15]*f->P[6][2] + t->Phi[16]*f->P[7][2] + t->Phi[17]*f->P[8][2];
-    w->M[3] = t->Phi[9]*f->P[0][3] + t->Phi[10]*f->P[1][3] + t->Phi[11]*f->P[2][3] +
-            t->Phi[12]*f->P[3][3] + t->Phi[13]*f->P[4][3] + t->Phi[14]*f->P[5][3] +
-            t->Phi[15]*f->P[6][3] + t->Phi[16]*f->P[7][3] + t->Phi[17]*f->P[8][3];
-    w->M[4] = t->Phi[9]*f->P[0][4] + t->Phi[10]*f->P[1][4] + t->Phi[11]*f->P[2][4] +
-            t->Phi[12]*f->P[3][4] + t->Phi[13]*f->P[4][4] + t->Phi[14]*f->P[5][4] +
-            t->Phi[15]*f->P[6][4] + t->Phi[16]*f->P[7][4] + t->Phi[17]*f->P[8][4];
-    w->M[5] = t->Phi[9]*f->P[0][5] + t->Phi[10]*f->P[1][5] + t->Phi[11]*f->P[2][5] +
-            t->Phi[12]*f->P[3][5] + t->Phi[13]*f->P[4][5] + t->Phi[14]*f->P[5][5] +
-            t->Phi[15]*f->P[6][5] + t->Phi[16]*f->P[7][5] + t->Phi[17]*f->P[8][5];
-    w->M[6] = t->Phi[9]*f->P[0][6] + t->Phi[10]*f->P[1][6] + t->Phi[11]*f->P[2][6] +
-            t->Phi[12]*f->P[3][6] + t->Phi[13]*f->P[4][6] + t->Phi[14]*f->P[5][6] +
-            t->Phi[15]*f->P[6][6] + t->Phi[16]*f->P[7][6] + t->Phi[17]*f->P[8][6];
-    w->M[7] = t->Phi[9]*f->P[0][7] + t->Phi[10]*f->P[1][7] + t->Phi[11]*f->P[2][7] +
-            t->Phi[12]*f->P[3][7] + t->Phi[13]*f->P[4][7] + t->Phi[14]*f->P[5][7] +
-            t->Phi[15]*f->P[6][7] + t->Phi[16]*f->P[7][7] + t->Phi[17]*f->P[8][7];
-    w->M[8] = t->Phi[9]*f->P[0][8] + t->Phi[10]*f->P[1][8] + t->Phi[11]*f->P[2][8] +
-            t->Phi[12]*f->P[3][8] + t->Phi[13]*f->P[4][8] + t->Phi[14]*f->P[5][8] +
-            t->Phi[15]*f->P[6][8] + t->Phi[16]*f->P[7][8] + t->Phi[17]*f->P[8][8];
-    w->M[9] = t->Phi[9]*f->P[0][9] + t->Phi[10]*f->P[1][9] + t->Phi[11]*f->P[2][9] +
-            t->Phi[12]*f->P[3][9] + t->Phi[13]*f->P[4][9] + t->Phi[14]*f->P[5][9] +
-            t->Phi[15]*f->P[6][9] + t->Phi[16]*f->P[7][9] + t->Phi[17]*f->P[8][9];
+    int c;
+    lane_pair b[9];
+    b[0] = lane_pair_of(t->Phi[9], t->Phi[9]);
+    b[1] = lane_pair_of(t->Phi[10], t->Phi[10]);
+    b[2] = lane_pair_of(t->Phi[11], t->Phi[11]);
+    b[3] = lane_pair_of(t->Phi[12], t->Phi[12]);
+    b[4] = lane_pair_of(t->Phi[13], t->Phi[13]);
+    b[5] = lane_pair_of(t->Phi[14], t->Phi[14]);
+    b[6] = lane_pair_of(t->Phi[15], t->Phi[15]);
+    b[7] = lane_pair_of(t->Phi[16], t->Phi[16]);
+    b[8] = lane_pair_of(t->Phi[17], t->Phi[17]);
+    for (c = 0; c + 1 < 11; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[8][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[10] = t->Phi[9]*f->P[0][10] + t->Phi[10]*f->P[1][10] + t->Phi[11]*f->P[2][10] +
             t->Phi[12]*f->P[3][10] + t->Phi[13]*f->P[4][10] + t->Phi[14]*f->P[5][10] +
             t->Phi[15]*f->P[6][10] + t->Phi[16]*f->P[7][10] + t->Phi[17]*f->P[8][10];
@@ -1952,36 +1946,29 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void phi_times_p_row_2(const gps_pseudorange11_twin
         const gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[18]*f->P[0][0] + t->Phi[19]*f->P[1][0] + t->Phi[20]*f->P[2][0] +
-            t->Phi[21]*f->P[3][0] + t->Phi[22]*f->P[4][0] + t->Phi[23]*f->P[5][0] +
-            t->Phi[24]*f->P[6][0] + t->Phi[25]*f->P[7][0] + t->Phi[26]*f->P[8][0];
-    w->M[1] = t->Phi[18]*f->P[0][1] + t->Phi[19]*f->P[1][1] + t->Phi[20]*f->P[2][1] +
-            t->Phi[21]*f->P[3][1] + t->Phi[22]*f->P[4][1] + t->Phi[23]*f->P[5][1] +
-            t->Phi[24]*f->P[6][1] + t->Phi[25]*f->P[7][1] + t->Phi[26]*f->P[8][1];
-    w->M[2] = t->Phi[18]*f->P[0][2] + t->Phi[19]*f->P[1][2] + t->Phi[20]*f->P[2][2] +
-            t->Phi[21]*f->P[3][2] + t->Phi[22]*f->P[4][2] + t->Phi[23]*f->P[5][2] +
-            t->Phi[24]*f->P[6][2] + t->Phi[25]*f->P[7][2] + t->Phi[26]*f->P[8][2];
-    w->M[3] = t->Phi[18]*f->P[0][3] + t->Phi[19]*f->P[1][3] + t->Phi[20]*f->P[2][3] +
-            t->Phi[21]*f->P[3][3] + t->Phi[22]*f->P[4][3] + t->Phi[23]*f->P[5][3] +
-            t->Phi[24]*f->P[6][3] + t->Phi[25]*f->P[7][3] + t->Phi[26]*f->P[8][3];
-    w->M[4] = t->Phi[18]*f->P[0][4] + t->Phi[19]*f->P[1][4] + t->Phi[20]*f->P[2][4] +
-            t->Phi[21]*f->P[3][4] + t->Phi[22]*f->P[4][4] + t->Phi[23]*f->P[5][4] +
-            t->Phi[24]*f->P[6][4] + t->Phi[25]*f->P[7][4] + t->Phi[26]*f->P[8][4];
-    w->M[5] = t->Phi[18]*f->P[0][5] + t->Phi[19]*f->P[1][5] + t->Phi[20]*f->P[2][5] +
-            t->Phi[21]*f->P[3][5] + t->Phi[22]*f->P[4][5] + t->Phi[23]*f->P[5][5] +
-            t->Phi[24]*f->P[6][5] + t->Phi[25]*f->P[7][5] + t->Phi[26]*f->P[8][5];
-    w->M[6] = t->Phi[18]*f->P[0][6] + t->Phi[19]*f->P[1][6] + t->Phi[20]*f->P[2][6] +
-            t->Phi[21]*f->P[3][6] + t->Phi[22]*f->P[4][6] + t->Phi[23]*f->P[5][6] +
-            t->Phi[24]*f->P[6][6] + t->Phi[25]*f->P[7][6] + t->Phi[26]*f->P[8][6];
-    w->M[7] = t->Phi[18]*f->P[0][7] + t->Phi[19]*f->P[1][7] + t->Phi[20]*f->P[2][7] +
-            t->Phi[21]*f->P[3][7] + t->Phi[22]*f->P[4][7] + t->Phi[23]*f->P[5][7] +
-            t->Phi[24]*f->P[6][7] + t->Phi[25]*f->P[7][7] + t->Phi[26]*f->P[8][7];
-    w->M[8] = t->Phi[18]*f->P[0][8] + t->Phi[19]*f->P[1][8] + t->Phi[20]*f->P[2][8] +
-            t->Phi[21]*f->P[3][8] + t->Phi[22]*f->P[4][8] + t->Phi[23]*f->P[5][8] +
-            t->Phi[24]*f->P[6][8] + t->Phi[25]*f->P[7][8] + t->Phi[26]*f->P[8][8];
-    w->M[9] = t->Phi[18]*f->P[0][9] + t->Phi[19]*f->P[1][9] + t->Phi[20]*f->P[2][9] +
-            t->Phi[21]*f->P[3][9] + t->Phi[22]*f->P[4][9] + t->Phi[23]*f->P[5][9] +
-            t->Phi[24]*f->P[6][9] + t->Phi[25]*f->P[7][9] + t->Phi[26]*f->P[8][9];
+    int c;
+    lane_pair b[9];
+    b[0] = lane_pair_of(t->Phi[18], t->Phi[18]);
+    b[1] = lane_pair_of(t->Phi[19], t->Phi[19]);
+    b[2] = lane_pair_of(t->Phi[20], t->Phi[20]);
+    b[3] = lane_pair_of(t->Phi[21], t->Phi[21]);
+    b[4] = lane_pair_of(t->Phi[22], t->Phi[22]);
+    b[5] = lane_pair_of(t->Phi[23], t->Phi[23]);
+    b[6] = lane_pair_of(t->Phi[24], t->Phi[24]);
+    b[7] = lane_pair_of(t->Phi[25], t->Phi[25]);
+    b[8] = lane_pair_of(t->Phi[26], t->Phi[26]);
+    for (c = 0; c + 1 < 11; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[8][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[10] = t->Phi[18]*f->P[0][10] + t->Phi[19]*f->P[1][10] + t->Phi[20]*f->P[2][10] +
             t->Phi[21]*f->P[3][10] + t->Phi[22]*f->P[4][10] + t->Phi[23]*f->P[5][10] +
             t->Phi[24]*f->P[6][10] + t->Phi[25]*f->P[7][10] + t->Phi[26]*f->P[8][10];
@@ -2030,36 +2017,29 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void phi_times_p_row_3(const gps_pseudorange11_twin
         const gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[27]*f->P[0][0] + t->Phi[28]*f->P[1][0] + t->Phi[29]*f->P[2][0] +
-            t->Phi[30]*f->P[3][0] + t->Phi[31]*f->P[4][0] + t->Phi[32]*f->P[5][0] +
-            t->Phi[33]*f->P[6][0] + t->Phi[34]*f->P[7][0] + t->Phi[35]*f->P[8][0];
-    w->M[1] = t->Phi[27]*f->P[0][1] + t->Phi[28]*f->P[1][1] + t->Phi[29]*f->P[2][1] +
-            t->Phi[30]*f->P[3][1] + t->Phi[31]*f->P[4][1] + t->Phi[32]*f->P[5][1] +
-            t->Phi[33]*f->P[6][1] + t->Phi[34]*f->P[7][1] + t->Phi[35]*f->P[8][1];
-    w->M[2] = t->Phi[27]*f->P[0][2] + t->Phi[28]*f->P[1][2] + t->Phi[29]*f->P[2][2] +
-            t->Phi[30]*f->P[3][2] + t->Phi[31]*f->P[4][2] + t->Phi[32]*f->P[5][2] +
-            t->Phi[33]*f->P[6][2] + t->Phi[34]*f->P[7][2] + t->Phi[35]*f->P[8][2];
-    w->M[3] = t->Phi[27]*f->P[0][3] + t->Phi[28]*f->P[1][3] + t->Phi[29]*f->P[2][3] +
-            t->Phi[30]*f->P[3][3] + t->Phi[31]*f->P[4][3] + t->Phi[32]*f->P[5][3] +
-            t->Phi[33]*f->P[6][3] + t->Phi[34]*f->P[7][3] + t->Phi[35]*f->P[8][3];
-    w->M[4] = t->Phi[27]*f->P[0][4] + t->Phi[28]*f->P[1][4] + t->Phi[29]*f->P[2][4] +
-            t->Phi[30]*f->P[3][4] + t->Phi[31]*f->P[4][4] + t->Phi[32]*f->P[5][4] +
-            t->Phi[33]*f->P[6][4] + t->Phi[34]*f->P[7][4] + t->Phi[35]*f->P[8][4];
-    w->M[5] = t->Phi[27]*f->P[0][5] + t->Phi[28]*f->P[1][5] + t->Phi[29]*f->P[2][5] +
-            t->Phi[30]*f->P[3][5] + t->Phi[31]*f->P[4][5] + t->Phi[32]*f->P[5][5] +
-            t->Phi[33]*f->P[6][5] + t->Phi[34]*f->P[7][5] + t->Phi[35]*f->P[8][5];
-    w->M[6] = t->Phi[27]*f->P[0][6] + t->Phi[28]*f->P[1][6] + t->Phi[29]*f->P[2][6] +
-            t->Phi[30]*f->P[3][6] + t->Phi[31]*f->P[4][6] + t->Phi[32]*f->P[5][6] +
-            t->Phi[33]*f->P[6][6] + t->Phi[34]*f->P[7][6] + t->Phi[35]*f->P[8][6];
-    w->M[7] = t->Phi[27]*f->P[0][7] + t->Phi[28]*f->P[1][7] + t->Phi[29]*f->P[2][7] +
-            t->Phi[30]*f->P[3][7] + t->Phi[31]*f->P[4][7] + t->Phi[32]*f->P[5][7] +
-            t->Phi[33]*f->P[6][7] + t->Phi[34]*f->P[7][7] + t->Phi[35]*f->P[8][7];
-    w->M[8] = t->Phi[27]*f->P[0][8] + t->Phi[28]*f->P[1][8] + t->Phi[29]*f->P[2][8] +
-            t->Phi[30]*f->P[3][8] + t->Phi[31]*f->P[4][8] + t->Phi[32]*f->P[5][8] +
-            t->Phi[33]*f->P[6][8] + t->Phi[34]*f->P[7][8] + t->Phi[35]*f->P[8][8];
-    w->M[9] = t->Phi[27]*f->P[0][9] + t->Phi[28]*f->P[1][9] + t->Phi[29]*f->P[2][9] +
-            t->Phi[30]*f->P[3][9] + t->Phi[31]*f->P[4][9] + t->Phi[32]*f->P[5][9] +
-            t->Phi[33]*f->P[6][9] + t->Phi[34]*f->P[7][9] + t->Phi[35]*f->P[8][9];
+    int c;
+    lane_pair b[9];
+    b[0] = lane_pair_of(t->Phi[27], t->Phi[27]);
+    b[1] = lane_pair_of(t->Phi[28], t->Phi[28]);
+    b[2] = lane_pair_of(t->Phi[29], t->Phi[29]);
+    b[3] = lane_pair_of(t->Phi[30], t->Phi[30]);
+    b[4] = lane_pair_of(t->Phi[31], t->Phi[31]);
+    b[5] = lane_pair_of(t->Phi[32], t->Phi[32]);
+    b[6] = lane_pair_of(t->Phi[33], t->Phi[33]);
+    b[7] = lane_pair_of(t->Phi[34], t->Phi[34]);
+    b[8] = lane_pair_of(t->Phi[35], t->Phi[35]);
+    for (c = 0; c + 1 < 11; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[8][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[10] = t->Phi[27]*f->P[0][10] + t->Phi[28]*f->P[1][10] + t->Phi[29]*f->P[2][10] +
             t->Phi[30]*f->P[3][10] + t->Phi[31]*f->P[4][10] + t->Phi[32]*f->P[5][10] +
             t->Phi[33]*f->P[6][10] + t->Phi[34]*f->P[7][10] + t->Phi[35]*f->P[8][10];
@@ -2103,36 +2083,29 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void phi_times_p_row_4(const gps_pseudorange11_twin
         const gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[36]*f->P[0][0] + t->Phi[37]*f->P[1][0] + t->Phi[38]*f->P[2][0] +
-            t->Phi[39]*f->P[3][0] + t->Phi[40]*f->P[4][0] + t->Phi[41]*f->P[5][0] +
-            t->Phi[42]*f->P[6][0] + t->Phi[43]*f->P[7][0] + t->Phi[44]*f->P[8][0];
-    w->M[1] = t->Phi[36]*f->P[0][1] + t->Phi[37]*f->P[1][1] + t->Phi[38]*f->P[2][1] +
-            t->Phi[39]*f->P[3][1] + t->Phi[40]*f->P[4][1] + t->Phi[41]*f->P[5][1] +
-            t->Phi[42]*f->P[6][1] + t->Phi[43]*f->P[7][1] + t->Phi[44]*f->P[8][1];
-    w->M[2] = t->Phi[36]*f->P[0][2] + t->Phi[37]*f->P[1][2] + t->Phi[38]*f->P[2][2] +
-            t->Phi[39]*f->P[3][2] + t->Phi[40]*f->P[4][2] + t->Phi[41]*f->P[5][2] +
-            t->Phi[42]*f->P[6][2] + t->Phi[43]*f->P[7][2] + t->Phi[44]*f->P[8][2];
-    w->M[3] = t->Phi[36]*f->P[0][3] + t->Phi[37]*f->P[1][3] + t->Phi[38]*f->P[2][3] +
-            t->Phi[39]*f->P[3][3] + t->Phi[40]*f->P[4][3] + t->Phi[41]*f->P[5][3] +
-            t->Phi[42]*f->P[6][3] + t->Phi[43]*f->P[7][3] + t->Phi[44]*f->P[8][3];
-    w->M[4] = t->Phi[36]*f->P[0][4] + t->Phi[37]*f->P[1][4] + t->Phi[38]*f->P[2][4] +
-            t->Phi[39]*f->P[3][4] + t->Phi[40]*f->P[4][4] + t->Phi[41]*f->P[5][4] +
-            t->Phi[42]*f->P[6][4] + t->Phi[43]*f->P[7][4] + t->Phi[44]*f->P[8][4];
-    w->M[5] = t->Phi[36]*f->P[0][5] + t->Phi[37]*f->P[1][5] + t->Phi[38]*f->P[2][5] +
-            t->Phi[39]*f->P[3][5] + t->Phi[40]*f->P[4][5] + t->Phi[41]*f->P[5][5] +
-            t->Phi[42]*f->P[6][5] + t->Phi[43]*f->P[7][5] + t->Phi[44]*f->P[8][5];
-    w->M[6] = t->Phi[36]*f->P[0][6] + t->Phi[37]*f->P[1][6] + t->Phi[38]*f->P[2][6] +
-            t->Phi[39]*f->P[3][6] + t->Phi[40]*f->P[4][6] + t->Phi[41]*f->P[5][6] +
-            t->Phi[42]*f->P[6][6] + t->Phi[43]*f->P[7][6] + t->Phi[44]*f->P[8][6];
-    w->M[7] = t->Phi[36]*f->P[0][7] + t->Phi[37]*f->P[1][7] + t->Phi[38]*f->P[2][7] +
-            t->Phi[39]*f->P[3][7] + t->Phi[40]*f->P[4][7] + t->Phi[41]*f->P[5][7] +
-            t->Phi[42]*f->P[6][7] + t->Phi[43]*f->P[7][7] + t->Phi[44]*f->P[8][7];
-    w->M[8] = t->Phi[36]*f->P[0][8] + t->Phi[37]*f->P[1][8] + t->Phi[38]*f->P[2][8] +
-            t->Phi[39]*f->P[3][8] + t->Phi[40]*f->P[4][8] + t->Phi[41]*f->P[5][8] +
-            t->Phi[42]*f->P[6][8] + t->Phi[43]*f->P[7][8] + t->Phi[44]*f->P[8][8];
-    w->M[9] = t->Phi[36]*f->P[0][9] + t->Phi[37]*f->P[1][9] + t->Phi[38]*f->P[2][9] +
-            t->Phi[39]*f->P[3][9] + t->Phi[40]*f->P[4][9] + t->Phi[41]*f->P[5][9] +
-            t->Phi[42]*f->P[6][9] + t->Phi[43]*f->P[7][9] + t->Phi[44]*f->P[8][9];
+    int c;
+    lane_pair b[9];
+    b[0] = lane_pair_of(t->Phi[36], t->Phi[36]);
+    b[1] = lane_pair_of(t->Phi[37], t->Phi[37]);
+    b[2] = lane_pair_of(t->Phi[38], t->Phi[38]);
+    b[3] = lane_pair_of(t->Phi[39], t->Phi[39]);
+    b[4] = lane_pair_of(t->Phi[40], t->Phi[40]);
+    b[5] = lane_pair_of(t->Phi[41], t->Phi[41]);
+    b[6] = lane_pair_of(t->Phi[42], t->Phi[42]);
+    b[7] = lane_pair_of(t->Phi[43], t->Phi[43]);
+    b[8] = lane_pair_of(t->Phi[44], t->Phi[44]);
+    for (c = 0; c + 1 < 11; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[8][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[10] = t->Phi[36]*f->P[0][10] + t->Phi[37]*f->P[1][10] + t->Phi[38]*f->P[2][10] +
             t->Phi[39]*f->P[3][10] + t->Phi[40]*f->P[4][10] + t->Phi[41]*f->P[5][10] +
             t->Phi[42]*f->P[6][10] + t->Phi[43]*f->P[7][10] + t->Phi[44]*f->P[8][10];
@@ -2171,36 +2144,29 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void phi_times_p_row_5(const gps_pseudorange11_twin
         const gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[45]*f->P[0][0] + t->Phi[46]*f->P[1][0] + t->Phi[47]*f->P[2][0] +
-            t->Phi[48]*f->P[3][0] + t->Phi[49]*f->P[4][0] + t->Phi[50]*f->P[5][0] +
-            t->Phi[51]*f->P[6][0] + t->Phi[52]*f->P[7][0] + t->Phi[53]*f->P[8][0];
-    w->M[1] = t->Phi[45]*f->P[0][1] + t->Phi[46]*f->P[1][1] + t->Phi[47]*f->P[2][1] +
-            t->Phi[48]*f->P[3][1] + t->Phi[49]*f->P[4][1] + t->Phi[50]*f->P[5][1] +
-            t->Phi[51]*f->P[6][1] + t->Phi[52]*f->P[7][1] + t->Phi[53]*f->P[8][1];
-    w->M[2] = t->Phi[45]*f->P[0][2] + t->Phi[46]*f->P[1][2] + t->Phi[47]*f->P[2][2] +
-            t->Phi[48]*f->P[3][2] + t->Phi[49]*f->P[4][2] + t->Phi[50]*f->P[5][2] +
-            t->Phi[51]*f->P[6][2] + t->Phi[52]*f->P[7][2] + t->Phi[53]*f->P[8][2];
-    w->M[3] = t->Phi[45]*f->P[0][3] + t->Phi[46]*f->P[1][3] + t->Phi[47]*f->P[2][3] +
-            t->Phi[48]*f->P[3][3] + t->Phi[49]*f->P[4][3] + t->Phi[50]*f->P[5][3] +
-            t->Phi[51]*f->P[6][3] + t->Phi[52]*f->P[7][3] + t->Phi[53]*f->P[8][3];
-    w->M[4] = t->Phi[45]*f->P[0][4] + t->Phi[46]*f->P[1][4] + t->Phi[47]*f->P[2][4] +
-            t->Phi[48]*f->P[3][4] + t->Phi[49]*f->P[4][4] + t->Phi[50]*f->P[5][4] +
-            t->Phi[51]*f->P[6][4] + t->Phi[52]*f->P[7][4] + t->Phi[53]*f->P[8][4];
-    w->M[5] = t->Phi[45]*f->P[0][5] + t->Phi[46]*f->P[1][5] + t->Phi[47]*f->P[2][5] +
-            t->Phi[48]*f->P[3][5] + t->Phi[49]*f->P[4][5] + t->Phi[50]*f->P[5][5] +
-            t->Phi[51]*f->P[6][5] + t->Phi[52]*f->P[7][5] + t->Phi[53]*f->P[8][5];
-    w->M[6] = t->Phi[45]*f->P[0][6] + t->Phi[46]*f->P[1][6] + t->Phi[47]*f->P[2][6] +
-            t->Phi[48]*f->P[3][6] + t->Phi[49]*f->P[4][6] + t->Phi[50]*f->P[5][6] +
-            t->Phi[51]*f->P[6][6] + t->Phi[52]*f->P[7][6] + t->Phi[53]*f->P[8][6];
-    w->M[7] = t->Phi[45]*f->P[0][7] + t->Phi[46]*f->P[1][7] + t->Phi[47]*f->P[2][7] +
-            t->Phi[48]*f->P[3][7] + t->Phi[49]*f->P[4][7] + t->Phi[50]*f->P[5][7] +
-            t->Phi[51]*f->P[6][7] + t->Phi[52]*f->P[7][7] + t->Phi[53]*f->P[8][7];
-    w->M[8] = t->Phi[45]*f->P[0][8] + t->Phi[46]*f->P[1][8] + t->Phi[47]*f->P[2][8] +
-            t->Phi[48]*f->P[3][8] + t->Phi[49]*f->P[4][8] + t->Phi[50]*f->P[5][8] +
-            t->Phi[51]*f->P[6][8] + t->Phi[52]*f->P[7][8] + t->Phi[53]*f->P[8][8];
-    w->M[9] = t->Phi[45]*f->P[0][9] + t->Phi[46]*f->P[1][9] + t->Phi[47]*f->P[2][9] +
-            t->Phi[48]*f->P[3][9] + t->Phi[49]*f->P[4][9] + t->Phi[50]*f->P[5][9] +
-            t->Phi[51]*f->P[6][9] + t->Phi[52]*f->P[7][9] + t->Phi[53]*f->P[8][9];
+    int c;
+    lane_pair b[9];
+    b[0] = lane_pair_of(t->Phi[45], t->Phi[45]);
+    b[1] = lane_pair_of(t->Phi[46], t->Phi[46]);
+    b[2] = lane_pair_of(t->Phi[47], t->Phi[47]);
+    b[3] = lane_pair_of(t->Phi[48], t->Phi[48]);
+    b[4] = lane_pair_of(t->Phi[49], t->Phi[49]);
+    b[5] = lane_pair_of(t->Phi[50], t->Phi[50]);
+    b[6] = lane_pair_of(t->Phi[51], t->Phi[51]);
+    b[7] = lane_pair_of(t->Phi[52], t->Phi[52]);
+    b[8] = lane_pair_of(t->Phi[53], t->Phi[53]);
+    for (c = 0; c + 1 < 11; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[8][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[10] = t->Phi[45]*f->P[0][10] + t->Phi[46]*f->P[1][10] + t->Phi[47]*f->P[2][10] +
             t->Phi[48]*f->P[3][10] + t->Phi[49]*f->P[4][10] + t->Phi[50]*f->P[5][10] +
             t->Phi[51]*f->P[6][10] + t->Phi[52]*f->P[7][10] + t->Phi[53]*f->P[8][10];
@@ -2234,16 +2200,17 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void phi_times_p_row_6(const gps_pseudorange11_twin
         const gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[54]*f->P[6][0] + t->Phi[55]*f->P[7][0] + t->Phi[56]*f->P[8][0];
-    w->M[1] = t->Phi[54]*f->P[6][1] + t->Phi[55]*f->P[7][1] + t->Phi[56]*f->P[8][1];
-    w->M[2] = t->Phi[54]*f->P[6][2] + t->Phi[55]*f->P[7][2] + t->Phi[56]*f->P[8][2];
-    w->M[3] = t->Phi[54]*f->P[6][3] + t->Phi[55]*f->P[7][3] + t->Phi[56]*f->P[8][3];
-    w->M[4] = t->Phi[54]*f->P[6][4] + t->Phi[55]*f->P[7][4] + t->Phi[56]*f->P[8][4];
-    w->M[5] = t->Phi[54]*f->P[6][5] + t->Phi[55]*f->P[7][5] + t->Phi[56]*f->P[8][5];
-    w->M[6] = t->Phi[54]*f->P[6][6] + t->Phi[55]*f->P[7][6] + t->Phi[56]*f->P[8][6];
-    w->M[7] = t->Phi[54]*f->P[6][7] + t->Phi[55]*f->P[7][7] + t->Phi[56]*f->P[8][7];
-    w->M[8] = t->Phi[54]*f->P[6][8] + t->Phi[55]*f->P[7][8] + t->Phi[56]*f->P[8][8];
-    w->M[9] = t->Phi[54]*f->P[6][9] + t->Phi[55]*f->P[7][9] + t->Phi[56]*f->P[8][9];
+    int c;
+    lane_pair b[3];
+    b[0] = lane_pair_of(t->Phi[54], t->Phi[54]);
+    b[1] = lane_pair_of(t->Phi[55], t->Phi[55]);
+    b[2] = lane_pair_of(t->Phi[56], t->Phi[56]);
+    for (c = 0; c + 1 < 11; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[8][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[10] = t->Phi[54]*f->P[6][10] + t->Phi[55]*f->P[7][10] + t->Phi[56]*f->P[8][10];
 }
 
@@ -2268,16 +2235,17 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void phi_times_p_row_7(const gps_pseudorange11_twin
         const gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[57]*f->P[6][0] + t->Phi[58]*f->P[7][0] + t->Phi[59]*f->P[8][0];
-    w->M[1] = t->Phi[57]*f->P[6][1] + t->Phi[58]*f->P[7][1] + t->Phi[59]*f->P[8][1];
-    w->M[2] = t->Phi[57]*f->P[6][2] + t->Phi[58]*f->P[7][2] + t->Phi[59]*f->P[8][2];
-    w->M[3] = t->Phi[57]*f->P[6][3] + t->Phi[58]*f->P[7][3] + t->Phi[59]*f->P[8][3];
-    w->M[4] = t->Phi[57]*f->P[6][4] + t->Phi[58]*f->P[7][4] + t->Phi[59]*f->P[8][4];
-    w->M[5] = t->Phi[57]*f->P[6][5] + t->Phi[58]*f->P[7][5] + t->Phi[59]*f->P[8][5];
-    w->M[6] = t->Phi[57]*f->P[6][6] + t->Phi[58]*f->P[7][6] + t->Phi[59]*f->P[8][6];
-    w->M[7] = t->Phi[57]*f->P[6][7] + t->Phi[58]*f->P[7][7] + t->Phi[59]*f->P[8][7];
-    w->M[8] = t->Phi[57]*f->P[6][8] + t->Phi[58]*f->P[7][8] + t->Phi[59]*f->P[8][8];
-    w->M[9] = t->Phi[57]*f->P[6][9] + t->Phi[58]*f->P[7][9] + t->Phi[59]*f->P[8][9];
+    int c;
+    lane_pair b[3];
+    b[0] = lane_pair_of(t->Phi[57], t->Phi[57]);
+    b[1] = lane_pair_of(t->Phi[58], t->Phi[58]);
+    b[2] = lane_pair_of(t->Phi[59], t->Phi[59]);
+    for (c = 0; c + 1 < 11; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[8][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[10] = t->Phi[57]*f->P[6][10] + t->Phi[58]*f->P[7][10] + t->Phi[59]*f->P[8][10];
 }
 
@@ -2300,16 +2268,17 @@ GPS_PSEUDORANGE11_TWIN_BLOCK void phi_times_p_row_8(const gps_pseudorange11_twin
         const gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[60]*f->P[6][0] + t->Phi[61]*f->P[7][0] + t->Phi[62]*f->P[8][0];
-    w->M[1] = t->Phi[60]*f->P[6][1] + t->Phi[61]*f->P[7][1] + t->Phi[62]*f->P[8][1];
-    w->M[2] = t->Phi[60]*f->P[6][2] + t->Phi[61]*f->P[7][2] + t->Phi[62]*f->P[8][2];
-    w->M[3] = t->Phi[60]*f->P[6][3] + t->Phi[61]*f->P[7][3] + t->Phi[62]*f->P[8][3];
-    w->M[4] = t->Phi[60]*f->P[6][4] + t->Phi[61]*f->P[7][4] + t->Phi[62]*f->P[8][4];
-    w->M[5] = t->Phi[60]*f->P[6][5] + t->Phi[61]*f->P[7][5] + t->Phi[62]*f->P[8][5];
-    w->M[6] = t->Phi[60]*f->P[6][6] + t->Phi[61]*f->P[7][6] + t->Phi[62]*f->P[8][6];
-    w->M[7] = t->Phi[60]*f->P[6][7] + t->Phi[61]*f->P[7][7] + t->Phi[62]*f->P[8][7];
-    w->M[8] = t->Phi[60]*f->P[6][8] + t->Phi[61]*f->P[7][8] + t->Phi[62]*f->P[8][8];
-    w->M[9] = t->Phi[60]*f->P[6][9] + t->Phi[61]*f->P[7][9] + t->Phi[62]*f->P[8][9];
+    int c;
+    lane_pair b[3];
+    b[0] = lane_pair_of(t->Phi[60], t->Phi[60]);
+    b[1] = lane_pair_of(t->Phi[61], t->Phi[61]);
+    b[2] = lane_pair_of(t->Phi[62], t->Phi[62]);
+    for (c = 0; c + 1 < 11; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[8][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[10] = t->Phi[60]*f->P[6][10] + t->Phi[61]*f->P[7][10] + t->Phi[62]*f->P[8][10];
 }
 
@@ -2330,16 +2299,15 @@ static void phi_times_p_row_9(const gps_pseudorange11_twin_filter *restrict f, c
         gps_pseudorange11_twin_transition *restrict t, gps_pseudorange11_twin_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[63]*f->P[9][0] + t->Phi[64]*f->P[10][0];
-    w->M[1] = t->Phi[63]*f->P[9][1] + t->Phi[64]*f->P[10][1];
-    w->M[2] = t->Phi[63]*f->P[9][2] + t->Phi[64]*f->P[10][2];
-    w->M[3] = t->Phi[63]*f->P[9][3] + t->Phi[64]*f->P[10][3];
-    w->M[4] = t->Phi[63]*f->P[9][4] + t->Phi[64]*f->P[10][4];
-    w->M[5] = t->Phi[63]*f->P[9][5] + t->Phi[64]*f->P[10][5];
-    w->M[6] = t->Phi[63]*f->P[9][6] + t->Phi[64]*f->P[10][6];
-    w->M[7] = t->Phi[63]*f->P[9][7] + t->Phi[64]*f->P[10][7];
-    w->M[8] = t->Phi[63]*f->P[9][8] + t->Phi[64]*f->P[10][8];
-    w->M[9] = t->Phi[63]*f->P[9][9] + t->Phi[64]*f->P[10][9];
+    int c;
+    lane_pair b[2];
+    b[0] = lane_pair_of(t->Phi[63], t->Phi[63]);
+    b[1] = lane_pair_of(t->Phi[64], t->Phi[64]);
+    for (c = 0; c + 1 < 11; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[10][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[10] = t->Phi[63]*f->P[9][10] + t->Phi[64]*f->P[10][10];
 }
 

@@ -2207,11 +2207,25 @@ INS_GNSS21_BLOCK ins_gnss21_scalar transition_check(ins_gnss21_transition *restr
 INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
         ins_gnss21_discretize_scratch *restrict w)
 {
-    w->term[0][0] = w->S[6]*m->G[9] + w->S[7]*m->G[12] + w->S[8]*m->G[15];
-    w->term[0][1] = w->S[6]*m->G[10] + w->S[7]*m->G[13] + w->S[8]*m->G[16];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[6], w->S[6]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[7], w->S[7]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[8], w->S[8]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][0], pair);
+    }
     w->term[0][2] = w->S[6]*m->G[11] + w->S[7]*m->G[14] + w->S[8]*m->G[17];
-    w->term[0][3] = w->S[3]*m->G[0] + w->S[4]*m->G[3] + w->S[5]*m->G[6];
-    w->term[0][4] = w->S[3]*m->G[1] + w->S[4]*m->G[4] + w->S[5]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[3], w->S[3]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[4], w->S[4]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[5], w->S[5]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][3], pair);
+    }
     w->term[0][5] = w->S[3]*m->G[2] + w->S[4]*m->G[5] + w->S[5]*m->G[8];
     w->term[0][6] = w->S[9]*m->G[18];
     w->term[0][7] = w->S[10]*m->G[19];
@@ -2225,11 +2239,25 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
     w->term[0][15] = w->S[18]*m->G[27];
     w->term[0][16] = w->S[19]*m->G[28];
     w->term[0][17] = w->S[20]*m->G[29];
-    w->term[0][18] = w->S[28]*m->G[9] + w->S[29]*m->G[12] + w->S[30]*m->G[15];
-    w->term[0][19] = w->S[28]*m->G[10] + w->S[29]*m->G[13] + w->S[30]*m->G[16];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[28], w->S[28]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[29], w->S[29]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[30], w->S[30]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][18], pair);
+    }
     w->term[0][20] = w->S[28]*m->G[11] + w->S[29]*m->G[14] + w->S[30]*m->G[17];
-    w->term[0][21] = w->S[25]*m->G[0] + w->S[26]*m->G[3] + w->S[27]*m->G[6];
-    w->term[0][22] = w->S[25]*m->G[1] + w->S[26]*m->G[4] + w->S[27]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[27], w->S[27]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][21], pair);
+    }
     w->term[0][23] = w->S[25]*m->G[2] + w->S[26]*m->G[5] + w->S[27]*m->G[8];
     w->term[0][24] = w->S[31]*m->G[18];
     w->term[0][25] = w->S[32]*m->G[19];
@@ -2243,11 +2271,25 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
     w->term[0][33] = w->S[40]*m->G[27];
     w->term[0][34] = w->S[41]*m->G[28];
     w->term[0][35] = w->S[42]*m->G[29];
-    w->term[0][36] = w->S[50]*m->G[9] + w->S[51]*m->G[12] + w->S[52]*m->G[15];
-    w->term[0][37] = w->S[50]*m->G[10] + w->S[51]*m->G[13] + w->S[52]*m->G[16];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[51], w->S[51]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[52], w->S[52]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][36], pair);
+    }
     w->term[0][38] = w->S[50]*m->G[11] + w->S[51]*m->G[14] + w->S[52]*m->G[17];
-    w->term[0][39] = w->S[47]*m->G[0] + w->S[48]*m->G[3] + w->S[49]*m->G[6];
-    w->term[0][40] = w->S[47]*m->G[1] + w->S[48]*m->G[4] + w->S[49]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[47], w->S[47]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][39], pair);
+    }
     w->term[0][41] = w->S[47]*m->G[2] + w->S[48]*m->G[5] + w->S[49]*m->G[8];
     w->term[0][42] = w->S[53]*m->G[18];
     w->term[0][43] = w->S[54]*m->G[19];
@@ -2261,11 +2303,25 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
     w->term[0][51] = w->S[62]*m->G[27];
     w->term[0][52] = w->S[63]*m->G[28];
     w->term[0][53] = w->S[64]*m->G[29];
-    w->term[0][54] = w->S[72]*m->G[9] + w->S[73]*m->G[12] + w->S[74]*m->G[15];
-    w->term[0][55] = w->S[72]*m->G[10] + w->S[73]*m->G[13] + w->S[74]*m->G[16];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][54], pair);
+    }
     w->term[0][56] = w->S[72]*m->G[11] + w->S[73]*m->G[14] + w->S[74]*m->G[17];
-    w->term[0][57] = w->S[69]*m->G[0] + w->S[70]*m->G[3] + w->S[71]*m->G[6];
-    w->term[0][58] = w->S[69]*m->G[1] + w->S[70]*m->G[4] + w->S[71]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[69], w->S[69]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[70], w->S[70]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[71], w->S[71]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][57], pair);
+    }
     w->term[0][59] = w->S[69]*m->G[2] + w->S[70]*m->G[5] + w->S[71]*m->G[8];
     w->term[0][60] = w->S[75]*m->G[18];
     w->term[0][61] = w->S[76]*m->G[19];
@@ -2279,11 +2335,25 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
     w->term[0][69] = w->S[84]*m->G[27];
     w->term[0][70] = w->S[85]*m->G[28];
     w->term[0][71] = w->S[86]*m->G[29];
-    w->term[0][72] = w->S[94]*m->G[9] + w->S[95]*m->G[12] + w->S[96]*m->G[15];
-    w->term[0][73] = w->S[94]*m->G[10] + w->S[95]*m->G[13] + w->S[96]*m->G[16];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[94], w->S[94]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[95], w->S[95]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[96], w->S[96]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][72], pair);
+    }
     w->term[0][74] = w->S[94]*m->G[11] + w->S[95]*m->G[14] + w->S[96]*m->G[17];
-    w->term[0][75] = w->S[91]*m->G[0] + w->S[92]*m->G[3] + w->S[93]*m->G[6];
-    w->term[0][76] = w->S[91]*m->G[1] + w->S[92]*m->G[4] + w->S[93]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[91], w->S[91]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[92], w->S[92]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[93], w->S[93]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][75], pair);
+    }
     w->term[0][77] = w->S[91]*m->G[2] + w->S[92]*m->G[5] + w->S[93]*m->G[8];
     w->term[0][78] = w->S[97]*m->G[18];
     w->term[0][79] = w->S[98]*m->G[19];
@@ -2297,11 +2367,25 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
     w->term[0][87] = w->S[106]*m->G[27];
     w->term[0][88] = w->S[107]*m->G[28];
     w->term[0][89] = w->S[108]*m->G[29];
-    w->term[0][90] = w->S[116]*m->G[9] + w->S[117]*m->G[12] + w->S[118]*m->G[15];
-    w->term[0][91] = w->S[116]*m->G[10] + w->S[117]*m->G[13] + w->S[118]*m->G[16];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[116], w->S[116]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[117], w->S[117]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[118], w->S[118]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][90], pair);
+    }
     w->term[0][92] = w->S[116]*m->G[11] + w->S[117]*m->G[14] + w->S[118]*m->G[17];
-    w->term[0][93] = w->S[113]*m->G[0] + w->S[114]*m->G[3] + w->S[115]*m->G[6];
-    w->term[0][94] = w->S[113]*m->G[1] + w->S[114]*m->G[4] + w->S[115]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[113], w->S[113]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[114], w->S[114]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[115], w->S[115]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][93], pair);
+    }
     w->term[0][95] = w->S[113]*m->G[2] + w->S[114]*m->G[5] + w->S[115]*m->G[8];
     w->term[0][96] = w->S[119]*m->G[18];
     w->term[0][97] = w->S[120]*m->G[19];
@@ -2315,11 +2399,25 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
     w->term[0][105] = w->S[128]*m->G[27];
     w->term[0][106] = w->S[129]*m->G[28];
     w->term[0][107] = w->S[130]*m->G[29];
-    w->term[0][108] = w->S[138]*m->G[9] + w->S[139]*m->G[12] + w->S[140]*m->G[15];
-    w->term[0][109] = w->S[138]*m->G[10] + w->S[139]*m->G[13] + w->S[140]*m->G[16];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[138], w->S[138]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[139], w->S[139]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[140], w->S[140]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][108], pair);
+    }
     w->term[0][110] = w->S[138]*m->G[11] + w->S[139]*m->G[14] + w->S[140]*m->G[17];
-    w->term[0][111] = w->S[135]*m->G[0] + w->S[136]*m->G[3] + w->S[137]*m->G[6];
-    w->term[0][112] = w->S[135]*m->G[1] + w->S[136]*m->G[4] + w->S[137]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[135], w->S[135]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[136], w->S[136]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[137], w->S[137]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][111], pair);
+    }
     w->term[0][113] = w->S[135]*m->G[2] + w->S[136]*m->G[5] + w->S[137]*m->G[8];
     w->term[0][114] = w->S[141]*m->G[18];
     w->term[0][115] = w->S[142]*m->G[19];
@@ -2333,11 +2431,25 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
     w->term[0][123] = w->S[150]*m->G[27];
     w->term[0][124] = w->S[151]*m->G[28];
     w->term[0][125] = w->S[152]*m->G[29];
-    w->term[0][126] = w->S[160]*m->G[9] + w->S[161]*m->G[12] + w->S[162]*m->G[15];
-    w->term[0][127] = w->S[160]*m->G[10] + w->S[161]*m->G[13] + w->S[162]*m->G[16];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[160], w->S[160]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[161], w->S[161]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[162], w->S[162]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][126], pair);
+    }
     w->term[0][128] = w->S[160]*m->G[11] + w->S[161]*m->G[14] + w->S[162]*m->G[17];
-    w->term[0][129] = w->S[157]*m->G[0] + w->S[158]*m->G[3] + w->S[159]*m->G[6];
-    w->term[0][130] = w->S[157]*m->G[1] + w->S[158]*m->G[4] + w->S[159]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[157], w->S[157]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[158], w->S[158]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[159], w->S[159]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][129], pair);
+    }
     w->term[0][131] = w->S[157]*m->G[2] + w->S[158]*m->G[5] + w->S[159]*m->G[8];
     w->term[0][132] = w->S[163]*m->G[18];
     w->term[0][133] = w->S[164]*m->G[19];
@@ -2351,11 +2463,25 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
     w->term[0][141] = w->S[172]*m->G[27];
     w->term[0][142] = w->S[173]*m->G[28];
     w->term[0][143] = w->S[174]*m->G[29];
-    w->term[0][144] = w->S[182]*m->G[9] + w->S[183]*m->G[12] + w->S[184]*m->G[15];
-    w->term[0][145] = w->S[182]*m->G[10] + w->S[183]*m->G[13] + w->S[184]*m->G[16];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[182], w->S[182]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[183], w->S[183]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[184], w->S[184]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][144], pair);
+    }
     w->term[0][146] = w->S[182]*m->G[11] + w->S[183]*m->G[14] + w->S[184]*m->G[17];
-    w->term[0][147] = w->S[179]*m->G[0] + w->S[180]*m->G[3] + w->S[181]*m->G[6];
-    w->term[0][148] = w->S[179]*m->G[1] + w->S[180]*m->G[4] + w->S[181]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[179], w->S[179]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[180], w->S[180]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[181], w->S[181]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][147], pair);
+    }
     w->term[0][149] = w->S[179]*m->G[2] + w->S[180]*m->G[5] + w->S[181]*m->G[8];
     w->term[0][150] = w->S[185]*m->G[18];
     w->term[0][151] = w->S[186]*m->G[19];
@@ -2386,24 +2512,42 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
 INS_GNSS21_BLOCK void process_noise(const ins_gnss21_matrices *restrict m, ins_gnss21_transition
         *restrict t, ins_gnss21_discretize_scratch *restrict w, const ins_gnss21_scalar T)
 {
-    w->term[1][174] = T*m->q[0];
-    w->term[1][175] = T*m->q[1];
-    w->term[1][176] = T*m->q[2];
-    w->term[1][177] = T*m->q[3];
-    w->term[1][178] = T*m->q[4];
-    w->term[1][179] = T*m->q[5];
-    w->term[1][180] = T*m->q[6];
-    w->term[1][181] = T*m->q[7];
-    w->term[1][182] = T*m->q[8];
-    w->term[1][183] = T*m->q[9];
-    w->term[1][184] = T*m->q[10];
-    w->term[1][185] = T*m->q[11];
-    w->term[1][186] = T*m->q[12];
-    w->term[1][187] = T*m->q[13];
-    w->term[1][188] = T*m->q[14];
-    w->term[1][189] = T*m->q[15];
-    w->term[1][190] = T*m->q[16];
-    w->term[1][191] = T*m->q[17];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[0]));
+        lane_pair_store(&w->term[1][174], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[2]));
+        lane_pair_store(&w->term[1][176], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[4]));
+        lane_pair_store(&w->term[1][178], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[6]));
+        lane_pair_store(&w->term[1][180], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[8]));
+        lane_pair_store(&w->term[1][182], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[10]));
+        lane_pair_store(&w->term[1][184], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[12]));
+        lane_pair_store(&w->term[1][186], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[14]));
+        lane_pair_store(&w->term[1][188], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[16]));
+        lane_pair_store(&w->term[1][190], pair);
+    }
     w->term[1][0] = w->term[0][0]*w->term[1][174];
     w->term[1][1] = w->term[0][1]*w->term[1][175];
     w->term[1][2] = w->term[0][2]*w->term[1][176];
@@ -4131,146 +4275,53 @@ INS_GNSS21_BLOCK void state_predict(const ins_gnss21_filter *restrict f, const i
 INS_GNSS21_BLOCK void phi_times_p_row_0(const ins_gnss21_filter *restrict f, const
         ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[0]*f->P[0][0] + t->Phi[1]*f->P[1][0] + t->Phi[2]*f->P[2][0] +
-            t->Phi[3]*f->P[3][0] + t->Phi[4]*f->P[4][0] + t->Phi[5]*f->P[5][0] +
-            t->Phi[6]*f->P[6][0] + t->Phi[7]*f->P[7][0] + t->Phi[8]*f->P[8][0] +
-            t->Phi[9]*f->P[9][0] + t->Phi[10]*f->P[10][0] + t->Phi[11]*f->P[11][0] +
-            t->Phi[12]*f->P[12][0] + t->Phi[13]*f->P[13][0] + t->Phi[14]*f->P[14][0] +
-            t->Phi[15]*f->P[15][0] + t->Phi[16]*f->P[16][0] + t->Phi[17]*f->P[17][0] +
-            t->Phi[18]*f->P[18][0] + t->Phi[19]*f->P[19][0] + t->Phi[20]*f->P[20][0];
-    w->M[1] = t->Phi[0]*f->P[0][1] + t->Phi[1]*f->P[1][1] + t->Phi[2]*f->P[2][1] +
-            t->Phi[3]*f->P[3][1] + t->Phi[4]*f->P[4][1] + t->Phi[5]*f->P[5][1] +
-            t->Phi[6]*f->P[6][1] + t->Phi[7]*f->P[7][1] + t->Phi[8]*f->P[8][1] +
-            t->Phi[9]*f->P[9][1] + t->Phi[10]*f->P[10][1] + t->Phi[11]*f->P[11][1] +
-            t->Phi[12]*f->P[12][1] + t->Phi[13]*f->P[13][1] + t->Phi[14]*f->P[14][1] +
-            t->Phi[15]*f->P[15][1] + t->Phi[16]*f->P[16][1] + t->Phi[17]*f->P[17][1] +
-            t->Phi[18]*f->P[18][1] + t->Phi[19]*f->P[19][1] + t->Phi[20]*f->P[20][1];
-    w->M[2] = t->Phi[0]*f->P[0][2] + t->Phi[1]*f->P[1][2] + t->Phi[2]*f->P[2][2] +
-            t->Phi[3]*f->P[3][2] + t->Phi[4]*f->P[4][2] + t->Phi[5]*f->P[5][2] +
-            t->Phi[6]*f->P[6][2] + t->Phi[7]*f->P[7][2] + t->Phi[8]*f->P[8][2] +
-            t->Phi[9]*f->P[9][2] + t->Phi[10]*f->P[10][2] + t->Phi[11]*f->P[11][2] +
-            t->Phi[12]*f->P[12][2] + t->Phi[13]*f->P[13][2] + t->Phi[14]*f->P[14][2] +
-            t->Phi[15]*f->P[15][2] + t->Phi[16]*f->P[16][2] + t->Phi[17]*f->P[17][2] +
-            t->Phi[18]*f->P[18][2] + t->Phi[19]*f->P[19][2] + t->Phi[20]*f->P[20][2];
-    w->M[3] = t->Phi[0]*f->P[0][3] + t->Phi[1]*f->P[1][3] + t->Phi[2]*f->P[2][3] +
-            t->Phi[3]*f->P[3][3] + t->Phi[4]*f->P[4][3] + t->Phi[5]*f->P[5][3] +
-            t->Phi[6]*f->P[6][3] + t->Phi[7]*f->P[7][3] + t->Phi[8]*f->P[8][3] +
-            t->Phi[9]*f->P[9][3] + t->Phi[10]*f->P[10][3] + t->Phi[11]*f->P[11][3] +
-            t->Phi[12]*f->P[12][3] + t->Phi[13]*f->P[13][3] + t->Phi[14]*f->P[14][3] +
-            t->Phi[15]*f->P[15][3] + t->Phi[16]*f->P[16][3] + t->Phi[17]*f->P[17][3] +
-            t->Phi[18]*f->P[18][3] + t->Phi[19]*f->P[19][3] + t->Phi[20]*f->P[20][3];
-    w->M[4] = t->Phi[0]*f->P[0][4] + t->Phi[1]*f->P[1][4] + t->Phi[2]*f->P[2][4] +
-            t->Phi[3]*f->P[3][4] + t->Phi[4]*f->P[4][4] + t->Phi[5]*f->P[5][4] +
-            t->Phi[6]*f->P[6][4] + t->Phi[7]*f->P[7][4] + t->Phi[8]*f->P[8][4] +
-            t->Phi[9]*f->P[9][4] + t->Phi[10]*f->P[10][4] + t->Phi[11]*f->P[11][4] +
-            t->Phi[12]*f->P[12][4] + t->Phi[13]*f->P[13][4] + t->Phi[14]*f->P[14][4] +
-            t->Phi[15]*f->P[15][4] + t->Phi[16]*f->P[16][4] + t->Phi[17]*f->P[17][4] +
-            t->Phi[18]*f->P[18][4] + t->Phi[19]*f->P[19][4] + t->Phi[20]*f->P[20][4];
-    w->M[5] = t->Phi[0]*f->P[0][5] + t->Phi[1]*f->P[1][5] + t->Phi[2]*f->P[2][5] +
-            t->Phi[3]*f->P[3][5] + t->Phi[4]*f->P[4][5] + t->Phi[5]*f->P[5][5] +
-            t->Phi[6]*f->P[6][5] + t->Phi[7]*f->P[7][5] + t->Phi[8]*f->P[8][5] +
-            t->Phi[9]*f->P[9][5] + t->Phi[10]*f->P[10][5] + t->Phi[11]*f->P[11][5] +
-            t->Phi[12]*f->P[12][5] + t->Phi[13]*f->P[13][5] + t->Phi[14]*f->P[14][5] +
-            t->Phi[15]*f->P[15][5] + t->Phi[16]*f->P[16][5] + t->Phi[17]*f->P[17][5] +
-            t->Phi[18]*f->P[18][5] + t->Phi[19]*f->P[19][5] + t->Phi[20]*f->P[20][5];
-    w->M[6] = t->Phi[0]*f->P[0][6] + t->Phi[1]*f->P[1][6] + t->Phi[2]*f->P[2][6] +
-            t->Phi[3]*f->P[3][6] + t->Phi[4]*f->P[4][6] + t->Phi[5]*f->P[5][6] +
-            t->Phi[6]*f->P[6][6] + t->Phi[7]*f->P[7][6] + t->Phi[8]*f->P[8][6] +
-            t->Phi[9]*f->P[9][6] + t->Phi[10]*f->P[10][6] + t->Phi[11]*f->P[11][6] +
-            t->Phi[12]*f->P[12][6] + t->Phi[13]*f->P[13][6] + t->Phi[14]*f->P[14][6] +
-            t->Phi[15]*f->P[15][6] + t->Phi[16]*f->P[16][6] + t->Phi[17]*f->P[17][6] +
-            t->Phi[18]*f->P[18][6] + t->Phi[19]*f->P[19][6] + t->Phi[20]*f->P[20][6];
-    w->M[7] = t->Phi[0]*f->P[0][7] + t->Phi[1]*f->P[1][7] + t->Phi[2]*f->P[2][7] +
-            t->Phi[3]*f->P[3][7] + t->Phi[4]*f->P[4][7] + t->Phi[5]*f->P[5][7] +
-            t->Phi[6]*f->P[6][7] + t->Phi[7]*f->P[7][7] + t->Phi[8]*f->P[8][7] +
-            t->Phi[9]*f->P[9][7] + t->Phi[10]*f->P[10][7] + t->Phi[11]*f->P[11][7] +
-            t->Phi[12]*f->P[12][7] + t->Phi[13]*f->P[13][7] + t->Phi[14]*f->P[14][7] +
-            t->Phi[15]*f->P[15][7] + t->Phi[16]*f->P[16][7] + t->Phi[17]*f->P[17][7] +
-            t->Phi[18]*f->P[18][7] + t->Phi[19]*f->P[19][7] + t->Phi[20]*f->P[20][7];
-    w->M[8] = t->Phi[0]*f->P[0][8] + t->Phi[1]*f->P[1][8] + t->Phi[2]*f->P[2][8] +
-            t->Phi[3]*f->P[3][8] + t->Phi[4]*f->P[4][8] + t->Phi[5]*f->P[5][8] +
-            t->Phi[6]*f->P[6][8] + t->Phi[7]*f->P[7][8] + t->Phi[8]*f->P[8][8] +
-            t->Phi[9]*f->P[9][8] + t->Phi[10]*f->P[10][8] + t->Phi[11]*f->P[11][8] +
-            t->Phi[12]*f->P[12][8] + t->Phi[13]*f->P[13][8] + t->Phi[14]*f->P[14][8] +
-            t->Phi[15]*f->P[15][8] + t->Phi[16]*f->P[16][8] + t->Phi[17]*f->P[17][8] +
-            t->Phi[18]*f->P[18][8] + t->Phi[19]*f->P[19][8] + t->Phi[20]*f->P[20][8];
-    w->M[9] = t->Phi[0]*f->P[0][9] + t->Phi[1]*f->P[1][9] + t->Phi[2]*f->P[2][9] +
-            t->Phi[3]*f->P[3][9] + t->Phi[4]*f->P[4][9] + t->Phi[5]*f->P[5][9] +
-            t->Phi[6]*f->P[6][9] + t->Phi[7]*f->P[7][9] + t->Phi[8]*f->P[8][9] +
-            t->Phi[9]*f->P[9][9] + t->Phi[10]*f->P[10][9] + t->Phi[11]*f->P[11][9] +
-            t->Phi[12]*f->P[12][9] + t->Phi[13]*f->P[13][9] + t->Phi[14]*f->P[14][9] +
-            t->Phi[15]*f->P[15][9] + t->Phi[16]*f->P[16][9] + t->Phi[17]*f->P[17][9] +
-            t->Phi[18]*f->P[18][9] + t->Phi[19]*f->P[19][9] + t->Phi[20]*f->P[20][9];
-    w->M[10] = t->Phi[0]*f->P[0][10] + t->Phi[1]*f->P[1][10] + t->Phi[2]*f->P[2][10] +
-            t->Phi[3]*f->P[3][10] + t->Phi[4]*f->P[4][10] + t->Phi[5]*f->P[5][10] +
-            t->Phi[6]*f->P[6][10] + t->Phi[7]*f->P[7][10] + t->Phi[8]*f->P[8][10] +
-            t->Phi[9]*f->P[9][10] + t->Phi[10]*f->P[10][10] + t->Phi[11]*f->P[11][10] +
-            t->Phi[12]*f->P[12][10] + t->Phi[13]*f->P[13][10] + t->Phi[14]*f->P[14][10] +
-            t->Phi[15]*f->P[15][10] + t->Phi[16]*f->P[16][10] + t->Phi[17]*f->P[17][10] +
-            t->Phi[18]*f->P[18][10] + t->Phi[19]*f->P[19][10] + t->Phi[20]*f->P[20][10];
-    w->M[11] = t->Phi[0]*f->P[0][11] + t->Phi[1]*f->P[1][11] + t->Phi[2]*f->P[2][11] +
-            t->Phi[3]*f->P[3][11] + t->Phi[4]*f->P[4][11] + t->Phi[5]*f->P[5][11] +
-            t->Phi[6]*f->P[6][11] + t->Phi[7]*f->P[7][11] + t->Phi[8]*f->P[8][11] +
-            t->Phi[9]*f->P[9][11] + t->Phi[10]*f->P[10][11] + t->Phi[11]*f->P[11][11] +
-            t->Phi[12]*f->P[12][11] + t->Phi[13]*f->P[13][11] + t->Phi[14]*f->P[14][11] +
-            t->Phi[15]*f->P[15][11] + t->Phi[16]*f->P[16][11] + t->Phi[17]*f->P[17][11] +
-            t->Phi[18]*f->P[18][11] + t->Phi[19]*f->P[19][11] + t->Phi[20]*f->P[20][11];
-    w->M[12] = t->Phi[0]*f->P[0][12] + t->Phi[1]*f->P[1][12] + t->Phi[2]*f->P[2][12] +
-            t->Phi[3]*f->P[3][12] + t->Phi[4]*f->P[4][12] + t->Phi[5]*f->P[5][12] +
-            t->Phi[6]*f->P[6][12] + t->Phi[7]*f->P[7][12] + t->Phi[8]*f->P[8][12] +
-            t->Phi[9]*f->P[9][12] + t->Phi[10]*f->P[10][12] + t->Phi[11]*f->P[11][12] +
-            t->Phi[12]*f->P[12][12] + t->Phi[13]*f->P[13][12] + t->Phi[14]*f->P[14][12] +
-            t->Phi[15]*f->P[15][12] + t->Phi[16]*f->P[16][12] + t->Phi[17]*f->P[17][12] +
-            t->Phi[18]*f->P[18][12] + t->Phi[19]*f->P[19][12] + t->Phi[20]*f->P[20][12];
-    w->M[13] = t->Phi[0]*f->P[0][13] + t->Phi[1]*f->P[1][13] + t->Phi[2]*f->P[2][13] +
-            t->Phi[3]*f->P[3][13] + t->Phi[4]*f->P[4][13] + t->Phi[5]*f->P[5][13] +
-            t->Phi[6]*f->P[6][13] + t->Phi[7]*f->P[7][13] + t->Phi[8]*f->P[8][13] +
-            t->Phi[9]*f->P[9][13] + t->Phi[10]*f->P[10][13] + t->Phi[11]*f->P[11][13] +
-            t->Phi[12]*f->P[12][13] + t->Phi[13]*f->P[13][13] + t->Phi[14]*f->P[14][13] +
-            t->Phi[15]*f->P[15][13] + t->Phi[16]*f->P[16][13] + t->Phi[17]*f->P[17][13] +
-            t->Phi[18]*f->P[18][13] + t->Phi[19]*f->P[19][13] + t->Phi[20]*f->P[20][13];
-    w->M[14] = t->Phi[0]*f->P[0][14] + t->Phi[1]*f->P[1][14] + t->Phi[2]*f->P[2][14] +
-            t->Phi[3]*f->P[3][14] + t->Phi[4]*f->P[4][14] + t->Phi[5]*f->P[5][14] +
-            t->Phi[6]*f->P[6][14] + t->Phi[7]*f->P[7][14] + t->Phi[8]*f->P[8][14] +
-            t->Phi[9]*f->P[9][14] + t->Phi[10]*f->P[10][14] + t->Phi[11]*f->P[11][14] +
-            t->Phi[12]*f->P[12][14] + t->Phi[13]*f->P[13][14] + t->Phi[14]*f->P[14][14] +
-            t->Phi[15]*f->P[15][14] + t->Phi[16]*f->P[16][14] + t->Phi[17]*f->P[17][14] +
-            t->Phi[18]*f->P[18][14] + t->Phi[19]*f->P[19][14] + t->Phi[20]*f->P[20][14];
-    w->M[15] = t->Phi[0]*f->P[0][15] + t->Phi[1]*f->P[1][15] + t->Phi[2]*f->P[2][15] +
-            t->Phi[3]*f->P[3][15] + t->Phi[4]*f->P[4][15] + t->Phi[5]*f->P[5][15] +
-            t->Phi[6]*f->P[6][15] + t->Phi[7]*f->P[7][15] + t->Phi[8]*f->P[8][15] +
-            t->Phi[9]*f->P[9][15] + t->Phi[10]*f->P[10][15] + t->Phi[11]*f->P[11][15] +
-            t->Phi[12]*f->P[12][15] + t->Phi[13]*f->P[13][15] + t->Phi[14]*f->P[14][15] +
-            t->Phi[15]*f->P[15][15] + t->Phi[16]*f->P[16][15] + t->Phi[17]*f->P[17][15] +
-            t->Phi[18]*f->P[18][15] + t->Phi[19]*f->P[19][15] + t->Phi[20]*f->P[20][15];
-    w->M[16] = t->Phi[0]*f->P[0][16] + t->Phi[1]*f->P[1][16] + t->Phi[2]*f->P[2][16] +
-            t->Phi[3]*f->P[3][16] + t->Phi[4]*f->P[4][16] + t->Phi[5]*f->P[5][16] +
-            t->Phi[6]*f->P[6][16] + t->Phi[7]*f->P[7][16] + t->Phi[8]*f->P[8][16] +
-            t->Phi[9]*f->P[9][16] + t->Phi[10]*f->P[10][16] + t->Phi[11]*f->P[11][16] +
-            t->Phi[12]*f->P[12][16] + t->Phi[13]*f->P[13][16] + t->Phi[14]*f->P[14][16] +
-            t->Phi[15]*f->P[15][16] + t->Phi[16]*f->P[16][16] + t->Phi[17]*f->P[17][16] +
-            t->Phi[18]*f->P[18][16] + t->Phi[19]*f->P[19][16] + t->Phi[20]*f->P[20][16];
-    w->M[17] = t->Phi[0]*f->P[0][17] + t->Phi[1]*f->P[1][17] + t->Phi[2]*f->P[2][17] +
-            t->Phi[3]*f->P[3][17] + t->Phi[4]*f->P[4][17] + t->Phi[5]*f->P[5][17] +
-            t->Phi[6]*f->P[6][17] + t->Phi[7]*f->P[7][17] + t->Phi[8]*f->P[8][17] +
-            t->Phi[9]*f->P[9][17] + t->Phi[10]*f->P[10][17] + t->Phi[11]*f->P[11][17] +
-            t->Phi[12]*f->P[12][17] + t->Phi[13]*f->P[13][17] + t->Phi[14]*f->P[14][17] +
-            t->Phi[15]*f->P[15][17] + t->Phi[16]*f->P[16][17] + t->Phi[17]*f->P[17][17] +
-            t->Phi[18]*f->P[18][17] + t->Phi[19]*f->P[19][17] + t->Phi[20]*f->P[20][17];
-    w->M[18] = t->Phi[0]*f->P[0][18] + t->Phi[1]*f->P[1][18] + t->Phi[2]*f->P[2][18] +
-            t->Phi[3]*f->P[3][18] + t->Phi[4]*f->P[4][18] + t->Phi[5]*f->P[5][18] +
-            t->Phi[6]*f->P[6][18] + t->Phi[7]*f->P[7][18] + t->Phi[8]*f->P[8][18] +
-            t->Phi[9]*f->P[9][18] + t->Phi[10]*f->P[10][18] + t->Phi[11]*f->P[11][18] +
-            t->Phi[12]*f->P[12][18] + t->Phi[13]*f->P[13][18] + t->Phi[14]*f->P[14][18] +
-            t->Phi[15]*f->P[15][18] + t->Phi[16]*f->P[16][18] + t->Phi[17]*f->P[17][18] +
-            t->Phi[18]*f->P[18][18] + t->Phi[19]*f->P[19][18] + t->Phi[20]*f->P[20][18];
-    w->M[19] = t->Phi[0]*f->P[0][19] + t->Phi[1]*f->P[1][19] + t->Phi[2]*f->P[2][19] +
-            t->Phi[3]*f->P[3][19] + t->Phi[4]*f->P[4][19] + t->Phi[5]*f->P[5][19] +
-            t->Phi[6]*f->P[6][19] + t->Phi[7]*f->P[7][19] + t->Phi[8]*f->P[8][19] +
-            t->Phi[9]*f->P[9][19] + t->Phi[10]*f->P[10][19] + t->Phi[11]*f->P[11][19] +
-            t->Phi[12]*f->P[12][19] + t->Phi[13]*f->P[13][19] + t->Phi[14]*f->P[14][19] +
-            t->Phi[15]*f->P[15][19] + t->Phi[16]*f->P[16][19] + t->Phi[17]*f->P[17][19] +
-            t->Phi[18]*f->P[18][19] + t->Phi[19]*f->P[19][19] + t->Phi[20]*f->P[20][19];
+    int c;
+    lane_pair b[21];
+    b[0] = lane_pair_of(t->Phi[0], t->Phi[0]);
+    b[1] = lane_pair_of(t->Phi[1], t->Phi[1]);
+    b[2] = lane_pair_of(t->Phi[2], t->Phi[2]);
+    b[3] = lane_pair_of(t->Phi[3], t->Phi[3]);
+    b[4] = lane_pair_of(t->Phi[4], t->Phi[4]);
+    b[5] = lane_pair_of(t->Phi[5], t->Phi[5]);
+    b[6] = lane_pair_of(t->Phi[6], t->Phi[6]);
+    b[7] = lane_pair_of(t->Phi[7], t->Phi[7]);
+    b[8] = lane_pair_of(t->Phi[8], t->Phi[8]);
+    b[9] = lane_pair_of(t->Phi[9], t->Phi[9]);
+    b[10] = lane_pair_of(t->Phi[10], t->Phi[10]);
+    b[11] = lane_pair_of(t->Phi[11], t->Phi[11]);
+    b[12] = lane_pair_of(t->Phi[12], t->Phi[12]);
+    b[13] = lane_pair_of(t->Phi[13], t->Phi[13]);
+    b[14] = lane_pair_of(t->Phi[14], t->Phi[14]);
+    b[15] = lane_pair_of(t->Phi[15], t->Phi[15]);
+    b[16] = lane_pair_of(t->Phi[16], t->Phi[16]);
+    b[17] = lane_pair_of(t->Phi[17], t->Phi[17]);
+    b[18] = lane_pair_of(t->Phi[18], t->Phi[18]);
+    b[19] = lane_pair_of(t->Phi[19], t->Phi[19]);
+    b[20] = lane_pair_of(t->Phi[20], t->Phi[20]);
+    for (c = 0; c + 1 < 21; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[16][c]));
+        acc = lane_pair_add_product(acc, b[17], lane_pair_load(&f->P[17][c]));
+        acc = lane_pair_add_product(acc, b[18], lane_pair_load(&f->P[18][c]));
+        acc = lane_pair_add_product(acc, b[19], lane_pair_load(&f->P[19][c]));
+        acc = lane_pair_add_product(acc, b[20], lane_pair_load(&f->P[20][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[20] = t->Phi[0]*f->P[0][20] + t->Phi[1]*f->P[1][20] + t->Phi[2]*f->P[2][20] +
             t->Phi[3]*f->P[3][20] + t->Phi[4]*f->P[4][20] + t->Phi[5]*f->P[5][20] +
             t->Phi[6]*f->P[6][20] + t->Phi[7]*f->P[7][20] + t->Phi[8]*f->P[8][20] +
@@ -4404,146 +4455,53 @@ INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_0(const ins_gnss21_transition *
 INS_GNSS21_BLOCK void phi_times_p_row_1(const ins_gnss21_filter *restrict f, const
         ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[21]*f->P[0][0] + t->Phi[22]*f->P[1][0] + t->Phi[23]*f->P[2][0] +
-            t->Phi[24]*f->P[3][0] + t->Phi[25]*f->P[4][0] + t->Phi[26]*f->P[5][0] +
-            t->Phi[27]*f->P[6][0] + t->Phi[28]*f->P[7][0] + t->Phi[29]*f->P[8][0] +
-            t->Phi[30]*f->P[9][0] + t->Phi[31]*f->P[10][0] + t->Phi[32]*f->P[11][0] +
-            t->Phi[33]*f->P[12][0] + t->Phi[34]*f->P[13][0] + t->Phi[35]*f->P[14][0] +
-            t->Phi[36]*f->P[15][0] + t->Phi[37]*f->P[16][0] + t->Phi[38]*f->P[17][0] +
-            t->Phi[39]*f->P[18][0] + t->Phi[40]*f->P[19][0] + t->Phi[41]*f->P[20][0];
-    w->M[1] = t->Phi[21]*f->P[0][1] + t->Phi[22]*f->P[1][1] + t->Phi[23]*f->P[2][1] +
-            t->Phi[24]*f->P[3][1] + t->Phi[25]*f->P[4][1] + t->Phi[26]*f->P[5][1] +
-            t->Phi[27]*f->P[6][1] + t->Phi[28]*f->P[7][1] + t->Phi[29]*f->P[8][1] +
-            t->Phi[30]*f->P[9][1] + t->Phi[31]*f->P[10][1] + t->Phi[32]*f->P[11][1] +
-            t->Phi[33]*f->P[12][1] + t->Phi[34]*f->P[13][1] + t->Phi[35]*f->P[14][1] +
-            t->Phi[36]*f->P[15][1] + t->Phi[37]*f->P[16][1] + t->Phi[38]*f->P[17][1] +
-            t->Phi[39]*f->P[18][1] + t->Phi[40]*f->P[19][1] + t->Phi[41]*f->P[20][1];
-    w->M[2] = t->Phi[21]*f->P[0][2] + t->Phi[22]*f->P[1][2] + t->Phi[23]*f->P[2][2] +
-            t->Phi[24]*f->P[3][2] + t->Phi[25]*f->P[4][2] + t->Phi[26]*f->P[5][2] +
-            t->Phi[27]*f->P[6][2] + t->Phi[28]*f->P[7][2] + t->Phi[29]*f->P[8][2] +
-            t->Phi[30]*f->P[9][2] + t->Phi[31]*f->P[10][2] + t->Phi[32]*f->P[11][2] +
-            t->Phi[33]*f->P[12][2] + t->Phi[34]*f->P[13][2] + t->Phi[35]*f->P[14][2] +
-            t->Phi[36]*f->P[15][2] + t->Phi[37]*f->P[16][2] + t->Phi[38]*f->P[17][2] +
-            t->Phi[39]*f->P[18][2] + t->Phi[40]*f->P[19][2] + t->Phi[41]*f->P[20][2];
-    w->M[3] = t->Phi[21]*f->P[0][3] + t->Phi[22]*f->P[1][3] + t->Phi[23]*f->P[2][3] +
-            t->Phi[24]*f->P[3][3] + t->Phi[25]*f->P[4][3] + t->Phi[26]*f->P[5][3] +
-            t->Phi[27]*f->P[6][3] + t->Phi[28]*f->P[7][3] + t->Phi[29]*f->P[8][3] +
-            t->Phi[30]*f->P[9][3] + t->Phi[31]*f->P[10][3] + t->Phi[32]*f->P[11][3] +
-            t->Phi[33]*f->P[12][3] + t->Phi[34]*f->P[13][3] + t->Phi[35]*f->P[14][3] +
-            t->Phi[36]*f->P[15][3] + t->Phi[37]*f->P[16][3] + t->Phi[38]*f->P[17][3] +
-            t->Phi[39]*f->P[18][3] + t->Phi[40]*f->P[19][3] + t->Phi[41]*f->P[20][3];
-    w->M[4] = t->Phi[21]*f->P[0][4] + t->Phi[22]*f->P[1][4] + t->Phi[23]*f->P[2][4] +
-            t->Phi[24]*f->P[3][4] + t->Phi[25]*f->P[4][4] + t->Phi[26]*f->P[5][4] +
-            t->Phi[27]*f->P[6][4] + t->Phi[28]*f->P[7][4] + t->Phi[29]*f->P[8][4] +
-            t->Phi[30]*f->P[9][4] + t->Phi[31]*f->P[10][4] + t->Phi[32]*f->P[11][4] +
-            t->Phi[33]*f->P[12][4] + t->Phi[34]*f->P[13][4] + t->Phi[35]*f->P[14][4] +
-            t->Phi[36]*f->P[15][4] + t->Phi[37]*f->P[16][4] + t->Phi[38]*f->P[17][4] +
-            t->Phi[39]*f->P[18][4] + t->Phi[40]*f->P[19][4] + t->Phi[41]*f->P[20][4];
-    w->M[5] = t->Phi[21]*f->P[0][5] + t->Phi[22]*f->P[1][5] + t->Phi[23]*f->P[2][5] +
-            t->Phi[24]*f->P[3][5] + t->Phi[25]*f->P[4][5] + t->Phi[26]*f->P[5][5] +
-            t->Phi[27]*f->P[6][5] + t->Phi[28]*f->P[7][5] + t->Phi[29]*f->P[8][5] +
-            t->Phi[30]*f->P[9][5] + t->Phi[31]*f->P[10][5] + t->Phi[32]*f->P[11][5] +
-            t->Phi[33]*f->P[12][5] + t->Phi[34]*f->P[13][5] + t->Phi[35]*f->P[14][5] +
-            t->Phi[36]*f->P[15][5] + t->Phi[37]*f->P[16][5] + t->Phi[38]*f->P[17][5] +
-            t->Phi[39]*f->P[18][5] + t->Phi[40]*f->P[19][5] + t->Phi[41]*f->P[20][5];
-    w->M[6] = t->Phi[21]*f->P[0][6] + t->Phi[22]*f->P[1][6] + t->Phi[23]*f->P[2][6] +
-            t->Phi[24]*f->P[3][6] + t->Phi[25]*f->P[4][6] + t->Phi[26]*f->P[5][6] +
-            t->Phi[27]*f->P[6][6] + t->Phi[28]*f->P[7][6] + t->Phi[29]*f->P[8][6] +
-            t->Phi[30]*f->P[9][6] + t->Phi[31]*f->P[10][6] + t->Phi[32]*f->P[11][6] +
-            t->Phi[33]*f->P[12][6] + t->Phi[34]*f->P[13][6] + t->Phi[35]*f->P[14][6] +
-            t->Phi[36]*f->P[15][6] + t->Phi[37]*f->P[16][6] + t->Phi[38]*f->P[17][6] +
-            t->Phi[39]*f->P[18][6] + t->Phi[40]*f->P[19][6] + t->Phi[41]*f->P[20][6];
-    w->M[7] = t->Phi[21]*f->P[0][7] + t->Phi[22]*f->P[1][7] + t->Phi[23]*f->P[2][7] +
-            t->Phi[24]*f->P[3][7] + t->Phi[25]*f->P[4][7] + t->Phi[26]*f->P[5][7] +
-            t->Phi[27]*f->P[6][7] + t->Phi[28]*f->P[7][7] + t->Phi[29]*f->P[8][7] +
-            t->Phi[30]*f->P[9][7] + t->Phi[31]*f->P[10][7] + t->Phi[32]*f->P[11][7] +
-            t->Phi[33]*f->P[12][7] + t->Phi[34]*f->P[13][7] + t->Phi[35]*f->P[14][7] +
-            t->Phi[36]*f->P[15][7] + t->Phi[37]*f->P[16][7] + t->Phi[38]*f->P[17][7] +
-            t->Phi[39]*f->P[18][7] + t->Phi[40]*f->P[19][7] + t->Phi[41]*f->P[20][7];
-    w->M[8] = t->Phi[21]*f->P[0][8] + t->Phi[22]*f->P[1][8] + t->Phi[23]*f->P[2][8] +
-            t->Phi[24]*f->P[3][8] + t->Phi[25]*f->P[4][8] + t->Phi[26]*f->P[5][8] +
-            t->Phi[27]*f->P[6][8] + t->Phi[28]*f->P[7][8] + t->Phi[29]*f->P[8][8] +
-            t->Phi[30]*f->P[9][8] + t->Phi[31]*f->P[10][8] + t->Phi[32]*f->P[11][8] +
-            t->Phi[33]*f->P[12][8] + t->Phi[34]*f->P[13][8] + t->Phi[35]*f->P[14][8] +
-            t->Phi[36]*f->P[15][8] + t->Phi[37]*f->P[16][8] + t->Phi[38]*f->P[17][8] +
-            t->Phi[39]*f->P[18][8] + t->Phi[40]*f->P[19][8] + t->Phi[41]*f->P[20][8];
-    w->M[9] = t->Phi[21]*f->P[0][9] + t->Phi[22]*f->P[1][9] + t->Phi[23]*f->P[2][9] +
-            t->Phi[24]*f->P[3][9] + t->Phi[25]*f->P[4][9] + t->Phi[26]*f->P[5][9] +
-            t->Phi[27]*f->P[6][9] + t->Phi[28]*f->P[7][9] + t->Phi[29]*f->P[8][9] +
-            t->Phi[30]*f->P[9][9] + t->Phi[31]*f->P[10][9] + t->Phi[32]*f->P[11][9] +
-            t->Phi[33]*f->P[12][9] + t->Phi[34]*f->P[13][9] + t->Phi[35]*f->P[14][9] +
-            t->Phi[36]*f->P[15][9] + t->Phi[37]*f->P[16][9] + t->Phi[38]*f->P[17][9] +
-            t->Phi[39]*f->P[18][9] + t->Phi[40]*f->P[19][9] + t->Phi[41]*f->P[20][9];
-    w->M[10] = t->Phi[21]*f->P[0][10] + t->Phi[22]*f->P[1][10] + t->Phi[23]*f->P[2][10] +
-            t->Phi[24]*f->P[3][10] + t->Phi[25]*f->P[4][10] + t->Phi[26]*f->P[5][10] +
-            t->Phi[27]*f->P[6][10] + t->Phi[28]*f->P[7][10] + t->Phi[29]*f->P[8][10] +
-            t->Phi[30]*f->P[9][10] + t->Phi[31]*f->P[10][10] + t->Phi[32]*f->P[11][10] +
-            t->Phi[33]*f->P[12][10] + t->Phi[34]*f->P[13][10] + t->Phi[35]*f->P[14][10] +
-            t->Phi[36]*f->P[15][10] + t->Phi[37]*f->P[16][10] + t->Phi[38]*f->P[17][10] +
-            t->Phi[39]*f->P[18][10] + t->Phi[40]*f->P[19][10] + t->Phi[41]*f->P[20][10];
-    w->M[11] = t->Phi[21]*f->P[0][11] + t->Phi[22]*f->P[1][11] + t->Phi[23]*f->P[2][11] +
-            t->Phi[24]*f->P[3][11] + t->Phi[25]*f->P[4][11] + t->Phi[26]*f->P[5][11] +
-            t->Phi[27]*f->P[6][11] + t->Phi[28]*f->P[7][11] + t->Phi[29]*f->P[8][11] +
-            t->Phi[30]*f->P[9][11] + t->Phi[31]*f->P[10][11] + t->Phi[32]*f->P[11][11] +
-            t->Phi[33]*f->P[12][11] + t->Phi[34]*f->P[13][11] + t->Phi[35]*f->P[14][11] +
-            t->Phi[36]*f->P[15][11] + t->Phi[37]*f->P[16][11] + t->Phi[38]*f->P[17][11] +
-            t->Phi[39]*f->P[18][11] + t->Phi[40]*f->P[19][11] + t->Phi[41]*f->P[20][11];
-    w->M[12] = t->Phi[21]*f->P[0][12] + t->Phi[22]*f->P[1][12] + t->Phi[23]*f->P[2][12] +
-            t->Phi[24]*f->P[3][12] + t->Phi[25]*f->P[4][12] + t->Phi[26]*f->P[5][12] +
-            t->Phi[27]*f->P[6][12] + t->Phi[28]*f->P[7][12] + t->Phi[29]*f->P[8][12] +
-            t->Phi[30]*f->P[9][12] + t->Phi[31]*f->P[10][12] + t->Phi[32]*f->P[11][12] +
-            t->Phi[33]*f->P[12][12] + t->Phi[34]*f->P[13][12] + t->Phi[35]*f->P[14][12] +
-            t->Phi[36]*f->P[15][12] + t->Phi[37]*f->P[16][12] + t->Phi[38]*f->P[17][12] +
-            t->Phi[39]*f->P[18][12] + t->Phi[40]*f->P[19][12] + t->Phi[41]*f->P[20][12];
-    w->M[13] = t->Phi[21]*f->P[0][13] + t->Phi[22]*f->P[1][13] + t->Phi[23]*f->P[2][13] +
-            t->Phi[24]*f->P[3][13] + t->Phi[25]*f->P[4][13] + t->Phi[26]*f->P[5][13] +
-            t->Phi[27]*f->P[6][13] + t->Phi[28]*f->P[7][13] + t->Phi[29]*f->P[8][13] +
-            t->Phi[30]*f->P[9][13] + t->Phi[31]*f->P[10][13] + t->Phi[32]*f->P[11][13] +
-            t->Phi[33]*f->P[12][13] + t->Phi[34]*f->P[13][13] + t->Phi[35]*f->P[14][13] +
-            t->Phi[36]*f->P[15][13] + t->Phi[37]*f->P[16][13] + t->Phi[38]*f->P[17][13] +
-            t->Phi[39]*f->P[18][13] + t->Phi[40]*f->P[19][13] + t->Phi[41]*f->P[20][13];
-    w->M[14] = t->Phi[21]*f->P[0][14] + t->Phi[22]*f->P[1][14] + t->Phi[23]*f->P[2][14] +
-            t->Phi[24]*f->P[3][14] + t->Phi[25]*f->P[4][14] + t->Phi[26]*f->P[5][14] +
-            t->Phi[27]*f->P[6][14] + t->Phi[28]*f->P[7][14] + t->Phi[29]*f->P[8][14] +
-            t->Phi[30]*f->P[9][14] + t->Phi[31]*f->P[10][14] + t->Phi[32]*f->P[11][14] +
-            t->Phi[33]*f->P[12][14] + t->Phi[34]*f->P[13][14] + t->Phi[35]*f->P[14][14] +
-            t->Phi[36]*f->P[15][14] + t->Phi[37]*f->P[16][14] + t->Phi[38]*f->P[17][14] +
-            t->Phi[39]*f->P[18][14] + t->Phi[40]*f->P[19][14] + t->Phi[41]*f->P[20][14];
-    w->M[15] = t->Phi[21]*f->P[0][15] + t->Phi[22]*f->P[1][15] + t->Phi[23]*f->P[2][15] +
-            t->Phi[24]*f->P[3][15] + t->Phi[25]*f->P[4][15] + t->Phi[26]*f->P[5][15] +
-            t->Phi[27]*f->P[6][15] + t->Phi[28]*f->P[7][15] + t->Phi[29]*f->P[8][15] +
-            t->Phi[30]*f->P[9][15] + t->Phi[31]*f->P[10][15] + t->Phi[32]*f->P[11][15] +
-            t->Phi[33]*f->P[12][15] + t->Phi[34]*f->P[13][15] + t->Phi[35]*f->P[14][15] +
-            t->Phi[36]*f->P[15][15] + t->Phi[37]*f->P[16][15] + t->Phi[38]*f->P[17][15] +
-            t->Phi[39]*f->P[18][15] + t->Phi[40]*f->P[19][15] + t->Phi[41]*f->P[20][15];
-    w->M[16] = t->Phi[21]*f->P[0][16] + t->Phi[22]*f->P[1][16] + t->Phi[23]*f->P[2][16] +
-            t->Phi[24]*f->P[3][16] + t->Phi[25]*f->P[4][16] + t->Phi[26]*f->P[5][16] +
-            t->Phi[27]*f->P[6][16] + t->Phi[28]*f->P[7][16] + t->Phi[29]*f->P[8][16] +
-            t->Phi[30]*f->P[9][16] + t->Phi[31]*f->P[10][16] + t->Phi[32]*f->P[11][16] +
-            t->Phi[33]*f->P[12][16] + t->Phi[34]*f->P[13][16] + t->Phi[35]*f->P[14][16] +
-            t->Phi[36]*f->P[15][16] + t->Phi[37]*f->P[16][16] + t->Phi[38]*f->P[17][16] +
-            t->Phi[39]*f->P[18][16] + t->Phi[40]*f->P[19][16] + t->Phi[41]*f->P[20][16];
-    w->M[17] = t->Phi[21]*f->P[0][17] + t->Phi[22]*f->P[1][17] + t->Phi[23]*f->P[2][17] +
-            t->Phi[24]*f->P[3][17] + t->Phi[25]*f->P[4][17] + t->Phi[26]*f->P[5][17] +
-            t->Phi[27]*f->P[6][17] + t->Phi[28]*f->P[7][17] + t->Phi[29]*f->P[8][17] +
-            t->Phi[30]*f->P[9][17] + t->Phi[31]*f->P[10][17] + t->Phi[32]*f->P[11][17] +
-            t->Phi[33]*f->P[12][17] + t->Phi[34]*f->P[13][17] + t->Phi[35]*f->P[14][17] +
-            t->Phi[36]*f->P[15][17] + t->Phi[37]*f->P[16][17] + t->Phi[38]*f->P[17][17] +
-            t->Phi[39]*f->P[18][17] + t->Phi[40]*f->P[19][17] + t->Phi[41]*f->P[20][17];
-    w->M[18] = t->Phi[21]*f->P[0][18] + t->Phi[22]*f->P[1][18] + t->Phi[23]*f->P[2][18] +
-            t->Phi[24]*f->P[3][18] + t->Phi[25]*f->P[4][18] + t->Phi[26]*f->P[5][18] +
-            t->Phi[27]*f->P[6][18] + t->Phi[28]*f->P[7][18] + t->Phi[29]*f->P[8][18] +
-            t->Phi[30]*f->P[9][18] + t->Phi[31]*f->P[10][18] + t->Phi[32]*f->P[11][18] +
-            t->Phi[33]*f->P[12][18] + t->Phi[34]*f->P[13][18] + t->Phi[35]*f->P[14][18] +
-            t->Phi[36]*f->P[15][18] + t->Phi[37]*f->P[16][18] + t->Phi[38]*f->P[17][18] +
-            t->Phi[39]*f->P[18][18] + t->Phi[40]*f->P[19][18] + t->Phi[41]*f->P[20][18];
-    w->M[19] = t->Phi[21]*f->P[0][19] + t->Phi[22]*f->P[1][19] + t->Phi[23]*f->P[2][19] +
-            t->Phi[24]*f->P[3][19] + t->Phi[25]*f->P[4][19] + t->Phi[26]*f->P[5][19] +
-            t->Phi[27]*f->P[6][19] + t->Phi[28]*f->P[7][19] + t->Phi[29]*f->P[8][19] +
-            t->Phi[30]*f->P[9][19] + t->Phi[31]*f->P[10][19] + t->Phi[32]*f->P[11][19] +
-            t->Phi[33]*f->P[12][19] + t->Phi[34]*f->P[13][19] + t->Phi[35]*f->P[14][19] +
-            t->Phi[36]*f->P[15][19] + t->Phi[37]*f->P[16][19] + t->Phi[38]*f->P[17][19] +
-            t->Phi[39]*f->P[18][19] + t->Phi[40]*f->P[19][19] + t->Phi[41]*f->P[20][19];
+    int c;
+    lane_pair b[21];
+    b[0] = lane_pair_of(t->Phi[21], t->Phi[21]);
+    b[1] = lane_pair_of(t->Phi[22], t->Phi[22]);
+    b[2] = lane_pair_of(t->Phi[23], t->Phi[23]);
+    b[3] = lane_pair_of(t->Phi[24], t->Phi[24]);
+    b[4] = lane_pair_of(t->Phi[25], t->Phi[25]);
+    b[5] = lane_pair_of(t->Phi[26], t->Phi[26]);
+    b[6] = lane_pair_of(t->Phi[27], t->Phi[27]);
+    b[7] = lane_pair_of(t->Phi[28], t->Phi[28]);
+    b[8] = lane_pair_of(t->Phi[29], t->Phi[29]);
+    b[9] = lane_pair_of(t->Phi[30], t->Phi[30]);
+    b[10] = lane_pair_of(t->Phi[31], t->Phi[31]);
+    b[11] = lane_pair_of(t->Phi[32], t->Phi[32]);
+    b[12] = lane_pair_of(t->Phi[33], t->Phi[33]);
+    b[13] = lane_pair_of(t->Phi[34], t->Phi[34]);
+    b[14] = lane_pair_of(t->Phi[35], t->Phi[35]);
+    b[15] = lane_pair_of(t->Phi[36], t->Phi[36]);
+    b[16] = lane_pair_of(t->Phi[37], t->Phi[37]);
+    b[17] = lane_pair_of(t->Phi[38], t->Phi[38]);
+    b[18] = lane_pair_of(t->Phi[39], t->Phi[39]);
+    b[19] = lane_pair_of(t->Phi[40], t->Phi[40]);
+    b[20] = lane_pair_of(t->Phi[41], t->Phi[41]);
+    for (c = 0; c + 1 < 21; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[16][c]));
+        acc = lane_pair_add_product(acc, b[17], lane_pair_load(&f->P[17][c]));
+        acc = lane_pair_add_product(acc, b[18], lane_pair_load(&f->P[18][c]));
+        acc = lane_pair_add_product(acc, b[19], lane_pair_load(&f->P[19][c]));
+        acc = lane_pair_add_product(acc, b[20], lane_pair_load(&f->P[20][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[20] = t->Phi[21]*f->P[0][20] + t->Phi[22]*f->P[1][20] + t->Phi[23]*f->P[2][20] +
             t->Phi[24]*f->P[3][20] + t->Phi[25]*f->P[4][20] + t->Phi[26]*f->P[5][20] +
             t->Phi[27]*f->P[6][20] + t->Phi[28]*f->P[7][20] + t->Phi[29]*f->P[8][20] +
@@ -4666,146 +4624,53 @@ INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_1(const ins_gnss21_transition *
 INS_GNSS21_BLOCK void phi_times_p_row_2(const ins_gnss21_filter *restrict f, const
         ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[42]*f->P[0][0] + t->Phi[43]*f->P[1][0] + t->Phi[44]*f->P[2][0] +
-            t->Phi[45]*f->P[3][0] + t->Phi[46]*f->P[4][0] + t->Phi[47]*f->P[5][0] +
-            t->Phi[48]*f->P[6][0] + t->Phi[49]*f->P[7][0] + t->Phi[50]*f->P[8][0] +
-            t->Phi[51]*f->P[9][0] + t->Phi[52]*f->P[10][0] + t->Phi[53]*f->P[11][0] +
-            t->Phi[54]*f->P[12][0] + t->Phi[55]*f->P[13][0] + t->Phi[56]*f->P[14][0] +
-            t->Phi[57]*f->P[15][0] + t->Phi[58]*f->P[16][0] + t->Phi[59]*f->P[17][0] +
-            t->Phi[60]*f->P[18][0] + t->Phi[61]*f->P[19][0] + t->Phi[62]*f->P[20][0];
-    w->M[1] = t->Phi[42]*f->P[0][1] + t->Phi[43]*f->P[1][1] + t->Phi[44]*f->P[2][1] +
-            t->Phi[45]*f->P[3][1] + t->Phi[46]*f->P[4][1] + t->Phi[47]*f->P[5][1] +
-            t->Phi[48]*f->P[6][1] + t->Phi[49]*f->P[7][1] + t->Phi[50]*f->P[8][1] +
-            t->Phi[51]*f->P[9][1] + t->Phi[52]*f->P[10][1] + t->Phi[53]*f->P[11][1] +
-            t->Phi[54]*f->P[12][1] + t->Phi[55]*f->P[13][1] + t->Phi[56]*f->P[14][1] +
-            t->Phi[57]*f->P[15][1] + t->Phi[58]*f->P[16][1] + t->Phi[59]*f->P[17][1] +
-            t->Phi[60]*f->P[18][1] + t->Phi[61]*f->P[19][1] + t->Phi[62]*f->P[20][1];
-    w->M[2] = t->Phi[42]*f->P[0][2] + t->Phi[43]*f->P[1][2] + t->Phi[44]*f->P[2][2] +
-            t->Phi[45]*f->P[3][2] + t->Phi[46]*f->P[4][2] + t->Phi[47]*f->P[5][2] +
-            t->Phi[48]*f->P[6][2] + t->Phi[49]*f->P[7][2] + t->Phi[50]*f->P[8][2] +
-            t->Phi[51]*f->P[9][2] + t->Phi[52]*f->P[10][2] + t->Phi[53]*f->P[11][2] +
-            t->Phi[54]*f->P[12][2] + t->Phi[55]*f->P[13][2] + t->Phi[56]*f->P[14][2] +
-            t->Phi[57]*f->P[15][2] + t->Phi[58]*f->P[16][2] + t->Phi[59]*f->P[17][2] +
-            t->Phi[60]*f->P[18][2] + t->Phi[61]*f->P[19][2] + t->Phi[62]*f->P[20][2];
-    w->M[3] = t->Phi[42]*f->P[0][3] + t->Phi[43]*f->P[1][3] + t->Phi[44]*f->P[2][3] +
-            t->Phi[45]*f->P[3][3] + t->Phi[46]*f->P[4][3] + t->Phi[47]*f->P[5][3] +
-            t->Phi[48]*f->P[6][3] + t->Phi[49]*f->P[7][3] + t->Phi[50]*f->P[8][3] +
-            t->Phi[51]*f->P[9][3] + t->Phi[52]*f->P[10][3] + t->Phi[53]*f->P[11][3] +
-            t->Phi[54]*f->P[12][3] + t->Phi[55]*f->P[13][3] + t->Phi[56]*f->P[14][3] +
-            t->Phi[57]*f->P[15][3] + t->Phi[58]*f->P[16][3] + t->Phi[59]*f->P[17][3] +
-            t->Phi[60]*f->P[18][3] + t->Phi[61]*f->P[19][3] + t->Phi[62]*f->P[20][3];
-    w->M[4] = t->Phi[42]*f->P[0][4] + t->Phi[43]*f->P[1][4] + t->Phi[44]*f->P[2][4] +
-            t->Phi[45]*f->P[3][4] + t->Phi[46]*f->P[4][4] + t->Phi[47]*f->P[5][4] +
-            t->Phi[48]*f->P[6][4] + t->Phi[49]*f->P[7][4] + t->Phi[50]*f->P[8][4] +
-            t->Phi[51]*f->P[9][4] + t->Phi[52]*f->P[10][4] + t->Phi[53]*f->P[11][4] +
-            t->Phi[54]*f->P[12][4] + t->Phi[55]*f->P[13][4] + t->Phi[56]*f->P[14][4] +
-            t->Phi[57]*f->P[15][4] + t->Phi[58]*f->P[16][4] + t->Phi[59]*f->P[17][4] +
-            t->Phi[60]*f->P[18][4] + t->Phi[61]*f->P[19][4] + t->Phi[62]*f->P[20][4];
-    w->M[5] = t->Phi[42]*f->P[0][5] + t->Phi[43]*f->P[1][5] + t->Phi[44]*f->P[2][5] +
-            t->Phi[45]*f->P[3][5] + t->Phi[46]*f->P[4][5] + t->Phi[47]*f->P[5][5] +
-            t->Phi[48]*f->P[6][5] + t->Phi[49]*f->P[7][5] + t->Phi[50]*f->P[8][5] +
-            t->Phi[51]*f->P[9][5] + t->Phi[52]*f->P[10][5] + t->Phi[53]*f->P[11][5] +
-            t->Phi[54]*f->P[12][5] + t->Phi[55]*f->P[13][5] + t->Phi[56]*f->P[14][5] +
-            t->Phi[57]*f->P[15][5] + t->Phi[58]*f->P[16][5] + t->Phi[59]*f->P[17][5] +
-            t->Phi[60]*f->P[18][5] + t->Phi[61]*f->P[19][5] + t->Phi[62]*f->P[20][5];
-    w->M[6] = t->Phi[42]*f->P[0][6] + t->Phi[43]*f->P[1][6] + t->Phi[44]*f->P[2][6] +
-            t->Phi[45]*f->P[3][6] + t->Phi[46]*f->P[4][6] + t->Phi[47]*f->P[5][6] +
-            t->Phi[48]*f->P[6][6] + t->Phi[49]*f->P[7][6] + t->Phi[50]*f->P[8][6] +
-            t->Phi[51]*f->P[9][6] + t->Phi[52]*f->P[10][6] + t->Phi[53]*f->P[11][6] +
-            t->Phi[54]*f->P[12][6] + t->Phi[55]*f->P[13][6] + t->Phi[56]*f->P[14][6] +
-            t->Phi[57]*f->P[15][6] + t->Phi[58]*f->P[16][6] + t->Phi[59]*f->P[17][6] +
-            t->Phi[60]*f->P[18][6] + t->Phi[61]*f->P[19][6] + t->Phi[62]*f->P[20][6];
-    w->M[7] = t->Phi[42]*f->P[0][7] + t->Phi[43]*f->P[1][7] + t->Phi[44]*f->P[2][7] +
-            t->Phi[45]*f->P[3][7] + t->Phi[46]*f->P[4][7] + t->Phi[47]*f->P[5][7] +
-            t->Phi[48]*f->P[6][7] + t->Phi[49]*f->P[7][7] + t->Phi[50]*f->P[8][7] +
-            t->Phi[51]*f->P[9][7] + t->Phi[52]*f->P[10][7] + t->Phi[53]*f->P[11][7] +
-            t->Phi[54]*f->P[12][7] + t->Phi[55]*f->P[13][7] + t->Phi[56]*f->P[14][7] +
-            t->Phi[57]*f->P[15][7] + t->Phi[58]*f->P[16][7] + t->Phi[59]*f->P[17][7] +
-            t->Phi[60]*f->P[18][7] + t->Phi[61]*f->P[19][7] + t->Phi[62]*f->P[20][7];
-    w->M[8] = t->Phi[42]*f->P[0][8] + t->Phi[43]*f->P[1][8] + t->Phi[44]*f->P[2][8] +
-            t->Phi[45]*f->P[3][8] + t->Phi[46]*f->P[4][8] + t->Phi[47]*f->P[5][8] +
-            t->Phi[48]*f->P[6][8] + t->Phi[49]*f->P[7][8] + t->Phi[50]*f->P[8][8] +
-            t->Phi[51]*f->P[9][8] + t->Phi[52]*f->P[10][8] + t->Phi[53]*f->P[11][8] +
-            t->Phi[54]*f->P[12][8] + t->Phi[55]*f->P[13][8] + t->Phi[56]*f->P[14][8] +
-            t->Phi[57]*f->P[15][8] + t->Phi[58]*f->P[16][8] + t->Phi[59]*f->P[17][8] +
-            t->Phi[60]*f->P[18][8] + t->Phi[61]*f->P[19][8] + t->Phi[62]*f->P[20][8];
-    w->M[9] = t->Phi[42]*f->P[0][9] + t->Phi[43]*f->P[1][9] + t->Phi[44]*f->P[2][9] +
-            t->Phi[45]*f->P[3][9] + t->Phi[46]*f->P[4][9] + t->Phi[47]*f->P[5][9] +
-            t->Phi[48]*f->P[6][9] + t->Phi[49]*f->P[7][9] + t->Phi[50]*f->P[8][9] +
-            t->Phi[51]*f->P[9][9] + t->Phi[52]*f->P[10][9] + t->Phi[53]*f->P[11][9] +
-            t->Phi[54]*f->P[12][9] + t->Phi[55]*f->P[13][9] + t->Phi[56]*f->P[14][9] +
-            t->Phi[57]*f->P[15][9] + t->Phi[58]*f->P[16][9] + t->Phi[59]*f->P[17][9] +
-            t->Phi[60]*f->P[18][9] + t->Phi[61]*f->P[19][9] + t->Phi[62]*f->P[20][9];
-    w->M[10] = t->Phi[42]*f->P[0][10] + t->Phi[43]*f->P[1][10] + t->Phi[44]*f->P[2][10] +
-            t->Phi[45]*f->P[3][10] + t->Phi[46]*f->P[4][10] + t->Phi[47]*f->P[5][10] +
-            t->Phi[48]*f->P[6][10] + t->Phi[49]*f->P[7][10] + t->Phi[50]*f->P[8][10] +
-            t->Phi[51]*f->P[9][10] + t->Phi[52]*f->P[10][10] + t->Phi[53]*f->P[11][10] +
-            t->Phi[54]*f->P[12][10] + t->Phi[55]*f->P[13][10] + t->Phi[56]*f->P[14][10] +
-            t->Phi[57]*f->P[15][10] + t->Phi[58]*f->P[16][10] + t->Phi[59]*f->P[17][10] +
-            t->Phi[60]*f->P[18][10] + t->Phi[61]*f->P[19][10] + t->Phi[62]*f->P[20][10];
-    w->M[11] = t->Phi[42]*f->P[0][11] + t->Phi[43]*f->P[1][11] + t->Phi[44]*f->P[2][11] +
-            t->Phi[45]*f->P[3][11] + t->Phi[46]*f->P[4][11] + t->Phi[47]*f->P[5][11] +
-            t->Phi[48]*f->P[6][11] + t->Phi[49]*f->P[7][11] + t->Phi[50]*f->P[8][11] +
-            t->Phi[51]*f->P[9][11] + t->Phi[52]*f->P[10][11] + t->Phi[53]*f->P[11][11] +
-            t->Phi[54]*f->P[12][11] + t->Phi[55]*f->P[13][11] + t->Phi[56]*f->P[14][11] +
-            t->Phi[57]*f->P[15][11] + t->Phi[58]*f->P[16][11] + t->Phi[59]*f->P[17][11] +
-            t->Phi[60]*f->P[18][11] + t->Phi[61]*f->P[19][11] + t->Phi[62]*f->P[20][11];
-    w->M[12] = t->Phi[42]*f->P[0][12] + t->Phi[43]*f->P[1][12] + t->Phi[44]*f->P[2][12] +
-            t->Phi[45]*f->P[3][12] + t->Phi[46]*f->P[4][12] + t->Phi[47]*f->P[5][12] +
-            t->Phi[48]*f->P[6][12] + t->Phi[49]*f->P[7][12] + t->Phi[50]*f->P[8][12] +
-            t->Phi[51]*f->P[9][12] + t->Phi[52]*f->P[10][12] + t->Phi[53]*f->P[11][12] +
-            t->Phi[54]*f->P[12][12] + t->Phi[55]*f->P[13][12] + t->Phi[56]*f->P[14][12] +
-            t->Phi[57]*f->P[15][12] + t->Phi[58]*f->P[16][12] + t->Phi[59]*f->P[17][12] +
-            t->Phi[60]*f->P[18][12] + t->Phi[61]*f->P[19][12] + t->Phi[62]*f->P[20][12];
-    w->M[13] = t->Phi[42]*f->P[0][13] + t->Phi[43]*f->P[1][13] + t->Phi[44]*f->P[2][13] +
-            t->Phi[45]*f->P[3][13] + t->Phi[46]*f->P[4][13] + t->Phi[47]*f->P[5][13] +
-            t->Phi[48]*f->P[6][13] + t->Phi[49]*f->P[7][13] + t->Phi[50]*f->P[8][13] +
-            t->Phi[51]*f->P[9][13] + t->Phi[52]*f->P[10][13] + t->Phi[53]*f->P[11][13] +
-            t->Phi[54]*f->P[12][13] + t->Phi[55]*f->P[13][13] + t->Phi[56]*f->P[14][13] +
-            t->Phi[57]*f->P[15][13] + t->Phi[58]*f->P[16][13] + t->Phi[59]*f->P[17][13] +
-            t->Phi[60]*f->P[18][13] + t->Phi[61]*f->P[19][13] + t->Phi[62]*f->P[20][13];
-    w->M[14] = t->Phi[42]*f->P[0][14] + t->Phi[43]*f->P[1][14] + t->Phi[44]*f->P[2][14] +
-            t->Phi[45]*f->P[3][14] + t->Phi[46]*f->P[4][14] + t->Phi[47]*f->P[5][14] +
-            t->Phi[48]*f->P[6][14] + t->Phi[49]*f->P[7][14] + t->Phi[50]*f->P[8][14] +
-            t->Phi[51]*f->P[9][14] + t->Phi[52]*f->P[10][14] + t->Phi[53]*f->P[11][14] +
-            t->Phi[54]*f->P[12][14] + t->Phi[55]*f->P[13][14] + t->Phi[56]*f->P[14][14] +
-            t->Phi[57]*f->P[15][14] + t->Phi[58]*f->P[16][14] + t->Phi[59]*f->P[17][14] +
-            t->Phi[60]*f->P[18][14] + t->Phi[61]*f->P[19][14] + t->Phi[62]*f->P[20][14];
-    w->M[15] = t->Phi[42]*f->P[0][15] + t->Phi[43]*f->P[1][15] + t->Phi[44]*f->P[2][15] +
-            t->Phi[45]*f->P[3][15] + t->Phi[46]*f->P[4][15] + t->Phi[47]*f->P[5][15] +
-            t->Phi[48]*f->P[6][15] + t->Phi[49]*f->P[7][15] + t->Phi[50]*f->P[8][15] +
-            t->Phi[51]*f->P[9][15] + t->Phi[52]*f->P[10][15] + t->Phi[53]*f->P[11][15] +
-            t->Phi[54]*f->P[12][15] + t->Phi[55]*f->P[13][15] + t->Phi[56]*f->P[14][15] +
-            t->Phi[57]*f->P[15][15] + t->Phi[58]*f->P[16][15] + t->Phi[59]*f->P[17][15] +
-            t->Phi[60]*f->P[18][15] + t->Phi[61]*f->P[19][15] + t->Phi[62]*f->P[20][15];
-    w->M[16] = t->Phi[42]*f->P[0][16] + t->Phi[43]*f->P[1][16] + t->Phi[44]*f->P[2][16] +
-            t->Phi[45]*f->P[3][16] + t->Phi[46]*f->P[4][16] + t->Phi[47]*f->P[5][16] +
-            t->Phi[48]*f->P[6][16] + t->Phi[49]*f->P[7][16] + t->Phi[50]*f->P[8][16] +
-            t->Phi[51]*f->P[9][16] + t->Phi[52]*f->P[10][16] + t->Phi[53]*f->P[11][16] +
-            t->Phi[54]*f->P[12][16] + t->Phi[55]*f->P[13][16] + t->Phi[56]*f->P[14][16] +
-            t->Phi[57]*f->P[15][16] + t->Phi[58]*f->P[16][16] + t->Phi[59]*f->P[17][16] +
-            t->Phi[60]*f->P[18][16] + t->Phi[61]*f->P[19][16] + t->Phi[62]*f->P[20][16];
-    w->M[17] = t->Phi[42]*f->P[0][17] + t->Phi[43]*f->P[1][17] + t->Phi[44]*f->P[2][17] +
-            t->Phi[45]*f->P[3][17] + t->Phi[46]*f->P[4][17] + t->Phi[47]*f->P[5][17] +
-            t->Phi[48]*f->P[6][17] + t->Phi[49]*f->P[7][17] + t->Phi[50]*f->P[8][17] +
-            t->Phi[51]*f->P[9][17] + t->Phi[52]*f->P[10][17] + t->Phi[53]*f->P[11][17] +
-            t->Phi[54]*f->P[12][17] + t->Phi[55]*f->P[13][17] + t->Phi[56]*f->P[14][17] +
-            t->Phi[57]*f->P[15][17] + t->Phi[58]*f->P[16][17] + t->Phi[59]*f->P[17][17] +
-            t->Phi[60]*f->P[18][17] + t->Phi[61]*f->P[19][17] + t->Phi[62]*f->P[20][17];
-    w->M[18] = t->Phi[42]*f->P[0][18] + t->Phi[43]*f->P[1][18] + t->Phi[44]*f->P[2][18] +
-            t->Phi[45]*f->P[3][18] + t->Phi[46]*f->P[4][18] + t->Phi[47]*f->P[5][18] +
-            t->Phi[48]*f->P[6][18] + t->Phi[49]*f->P[7][18] + t->Phi[50]*f->P[8][18] +
-            t->Phi[51]*f->P[9][18] + t->Phi[52]*f->P[10][18] + t->Phi[53]*f->P[11][18] +
-            t->Phi[54]*f->P[12][18] + t->Phi[55]*f->P[13][18] + t->Phi[56]*f->P[14][18] +
-            t->Phi[57]*f->P[15][18] + t->Phi[58]*f->P[16][18] + t->Phi[59]*f->P[17][18] +
-            t->Phi[60]*f->P[18][18] + t->Phi[61]*f->P[19][18] + t->Phi[62]*f->P[20][18];
-    w->M[19] = t->Phi[42]*f->P[0][19] + t->Phi[43]*f->P[1][19] + t->Phi[44]*f->P[2][19] +
-            t->Phi[45]*f->P[3][19] + t->Phi[46]*f->P[4][19] + t->Phi[47]*f->P[5][19] +
-            t->Phi[48]*f->P[6][19] + t->Phi[49]*f->P[7][19] + t->Phi[50]*f->P[8][19] +
-            t->Phi[51]*f->P[9][19] + t->Phi[52]*f->P[10][19] + t->Phi[53]*f->P[11][19] +
-            t->Phi[54]*f->P[12][19] + t->Phi[55]*f->P[13][19] + t->Phi[56]*f->P[14][19] +
-            t->Phi[57]*f->P[15][19] + t->Phi[58]*f->P[16][19] + t->Phi[59]*f->P[17][19] +
-            t->Phi[60]*f->P[18][19] + t->Phi[61]*f->P[19][19] + t->Phi[62]*f->P[20][19];
+    int c;
+    lane_pair b[21];
+    b[0] = lane_pair_of(t->Phi[42], t->Phi[42]);
+    b[1] = lane_pair_of(t->Phi[43], t->Phi[43]);
+    b[2] = lane_pair_of(t->Phi[44], t->Phi[44]);
+    b[3] = lane_pair_of(t->Phi[45], t->Phi[45]);
+    b[4] = lane_pair_of(t->Phi[46], t->Phi[46]);
+    b[5] = lane_pair_of(t->Phi[47], t->Phi[47]);
+    b[6] = lane_pair_of(t->Phi[48], t->Phi[48]);
+    b[7] = lane_pair_of(t->Phi[49], t->Phi[49]);
+    b[8] = lane_pair_of(t->Phi[50], t->Phi[50]);
+    b[9] = lane_pair_of(t->Phi[51], t->Phi[51]);
+    b[10] = lane_pair_of(t->Phi[52], t->Phi[52]);
+    b[11] = lane_pair_of(t->Phi[53], t->Phi[53]);
+    b[12] = lane_pair_of(t->Phi[54], t->Phi[54]);
+    b[13] = lane_pair_of(t->Phi[55], t->Phi[55]);
+    b[14] = lane_pair_of(t->Phi[56], t->Phi[56]);
+    b[15] = lane_pair_of(t->Phi[57], t->Phi[57]);
+    b[16] = lane_pair_of(t->Phi[58], t->Phi[58]);
+    b[17] = lane_pair_of(t->Phi[59], t->Phi[59]);
+    b[18] = lane_pair_of(t->Phi[60], t->Phi[60]);
+    b[19] = lane_pair_of(t->Phi[61], t->Phi[61]);
+    b[20] = lane_pair_of(t->Phi[62], t->Phi[62]);
+    for (c = 0; c + 1 < 21; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[16][c]));
+        acc = lane_pair_add_product(acc, b[17], lane_pair_load(&f->P[17][c]));
+        acc = lane_pair_add_product(acc, b[18], lane_pair_load(&f->P[18][c]));
+        acc = lane_pair_add_product(acc, b[19], lane_pair_load(&f->P[19][c]));
+        acc = lane_pair_add_product(acc, b[20], lane_pair_load(&f->P[20][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[20] = t->Phi[42]*f->P[0][20] + t->Phi[43]*f->P[1][20] + t->Phi[44]*f->P[2][20] +
             t->Phi[45]*f->P[3][20] + t->Phi[46]*f->P[4][20] + t->Phi[47]*f->P[5][20] +
             t->Phi[48]*f->P[6][20] + t->Phi[49]*f->P[7][20] + t->Phi[50]*f->P[8][20] +
@@ -4917,146 +4782,53 @@ INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_2(const ins_gnss21_transition *
 INS_GNSS21_BLOCK void phi_times_p_row_3(const ins_gnss21_filter *restrict f, const
         ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[63]*f->P[0][0] + t->Phi[64]*f->P[1][0] + t->Phi[65]*f->P[2][0] +
-            t->Phi[66]*f->P[3][0] + t->Phi[67]*f->P[4][0] + t->Phi[68]*f->P[5][0] +
-            t->Phi[69]*f->P[6][0] + t->Phi[70]*f->P[7][0] + t->Phi[71]*f->P[8][0] +
-            t->Phi[72]*f->P[9][0] + t->Phi[73]*f->P[10][0] + t->Phi[74]*f->P[11][0] +
-            t->Phi[75]*f->P[12][0] + t->Phi[76]*f->P[13][0] + t->Phi[77]*f->P[14][0] +
-            t->Phi[78]*f->P[15][0] + t->Phi[79]*f->P[16][0] + t->Phi[80]*f->P[17][0] +
-            t->Phi[81]*f->P[18][0] + t->Phi[82]*f->P[19][0] + t->Phi[83]*f->P[20][0];
-    w->M[1] = t->Phi[63]*f->P[0][1] + t->Phi[64]*f->P[1][1] + t->Phi[65]*f->P[2][1] +
-            t->Phi[66]*f->P[3][1] + t->Phi[67]*f->P[4][1] + t->Phi[68]*f->P[5][1] +
-            t->Phi[69]*f->P[6][1] + t->Phi[70]*f->P[7][1] + t->Phi[71]*f->P[8][1] +
-            t->Phi[72]*f->P[9][1] + t->Phi[73]*f->P[10][1] + t->Phi[74]*f->P[11][1] +
-            t->Phi[75]*f->P[12][1] + t->Phi[76]*f->P[13][1] + t->Phi[77]*f->P[14][1] +
-            t->Phi[78]*f->P[15][1] + t->Phi[79]*f->P[16][1] + t->Phi[80]*f->P[17][1] +
-            t->Phi[81]*f->P[18][1] + t->Phi[82]*f->P[19][1] + t->Phi[83]*f->P[20][1];
-    w->M[2] = t->Phi[63]*f->P[0][2] + t->Phi[64]*f->P[1][2] + t->Phi[65]*f->P[2][2] +
-            t->Phi[66]*f->P[3][2] + t->Phi[67]*f->P[4][2] + t->Phi[68]*f->P[5][2] +
-            t->Phi[69]*f->P[6][2] + t->Phi[70]*f->P[7][2] + t->Phi[71]*f->P[8][2] +
-            t->Phi[72]*f->P[9][2] + t->Phi[73]*f->P[10][2] + t->Phi[74]*f->P[11][2] +
-            t->Phi[75]*f->P[12][2] + t->Phi[76]*f->P[13][2] + t->Phi[77]*f->P[14][2] +
-            t->Phi[78]*f->P[15][2] + t->Phi[79]*f->P[16][2] + t->Phi[80]*f->P[17][2] +
-            t->Phi[81]*f->P[18][2] + t->Phi[82]*f->P[19][2] + t->Phi[83]*f->P[20][2];
-    w->M[3] = t->Phi[63]*f->P[0][3] + t->Phi[64]*f->P[1][3] + t->Phi[65]*f->P[2][3] +
-            t->Phi[66]*f->P[3][3] + t->Phi[67]*f->P[4][3] + t->Phi[68]*f->P[5][3] +
-            t->Phi[69]*f->P[6][3] + t->Phi[70]*f->P[7][3] + t->Phi[71]*f->P[8][3] +
-            t->Phi[72]*f->P[9][3] + t->Phi[73]*f->P[10][3] + t->Phi[74]*f->P[11][3] +
-            t->Phi[75]*f->P[12][3] + t->Phi[76]*f->P[13][3] + t->Phi[77]*f->P[14][3] +
-            t->Phi[78]*f->P[15][3] + t->Phi[79]*f->P[16][3] + t->Phi[80]*f->P[17][3] +
-            t->Phi[81]*f->P[18][3] + t->Phi[82]*f->P[19][3] + t->Phi[83]*f->P[20][3];
-    w->M[4] = t->Phi[63]*f->P[0][4] + t->Phi[64]*f->P[1][4] + t->Phi[65]*f->P[2][4] +
-            t->Phi[66]*f->P[3][4] + t->Phi[67]*f->P[4][4] + t->Phi[68]*f->P[5][4] +
-            t->Phi[69]*f->P[6][4] + t->Phi[70]*f->P[7][4] + t->Phi[71]*f->P[8][4] +
-            t->Phi[72]*f->P[9][4] + t->Phi[73]*f->P[10][4] + t->Phi[74]*f->P[11][4] +
-            t->Phi[75]*f->P[12][4] + t->Phi[76]*f->P[13][4] + t->Phi[77]*f->P[14][4] +
-            t->Phi[78]*f->P[15][4] + t->Phi[79]*f->P[16][4] + t->Phi[80]*f->P[17][4] +
-            t->Phi[81]*f->P[18][4] + t->Phi[82]*f->P[19][4] + t->Phi[83]*f->P[20][4];
-    w->M[5] = t->Phi[63]*f->P[0][5] + t->Phi[64]*f->P[1][5] + t->Phi[65]*f->P[2][5] +
-            t->Phi[66]*f->P[3][5] + t->Phi[67]*f->P[4][5] + t->Phi[68]*f->P[5][5] +
-            t->Phi[69]*f->P[6][5] + t->Phi[70]*f->P[7][5] + t->Phi[71]*f->P[8][5] +
-            t->Phi[72]*f->P[9][5] + t->Phi[73]*f->P[10][5] + t->Phi[74]*f->P[11][5] +
-            t->Phi[75]*f->P[12][5] + t->Phi[76]*f->P[13][5] + t->Phi[77]*f->P[14][5] +
-            t->Phi[78]*f->P[15][5] + t->Phi[79]*f->P[16][5] + t->Phi[80]*f->P[17][5] +
-            t->Phi[81]*f->P[18][5] + t->Phi[82]*f->P[19][5] + t->Phi[83]*f->P[20][5];
-    w->M[6] = t->Phi[63]*f->P[0][6] + t->Phi[64]*f->P[1][6] + t->Phi[65]*f->P[2][6] +
-            t->Phi[66]*f->P[3][6] + t->Phi[67]*f->P[4][6] + t->Phi[68]*f->P[5][6] +
-            t->Phi[69]*f->P[6][6] + t->Phi[70]*f->P[7][6] + t->Phi[71]*f->P[8][6] +
-            t->Phi[72]*f->P[9][6] + t->Phi[73]*f->P[10][6] + t->Phi[74]*f->P[11][6] +
-            t->Phi[75]*f->P[12][6] + t->Phi[76]*f->P[13][6] + t->Phi[77]*f->P[14][6] +
-            t->Phi[78]*f->P[15][6] + t->Phi[79]*f->P[16][6] + t->Phi[80]*f->P[17][6] +
-            t->Phi[81]*f->P[18][6] + t->Phi[82]*f->P[19][6] + t->Phi[83]*f->P[20][6];
-    w->M[7] = t->Phi[63]*f->P[0][7] + t->Phi[64]*f->P[1][7] + t->Phi[65]*f->P[2][7] +
-            t->Phi[66]*f->P[3][7] + t->Phi[67]*f->P[4][7] + t->Phi[68]*f->P[5][7] +
-            t->Phi[69]*f->P[6][7] + t->Phi[70]*f->P[7][7] + t->Phi[71]*f->P[8][7] +
-            t->Phi[72]*f->P[9][7] + t->Phi[73]*f->P[10][7] + t->Phi[74]*f->P[11][7] +
-            t->Phi[75]*f->P[12][7] + t->Phi[76]*f->P[13][7] + t->Phi[77]*f->P[14][7] +
-            t->Phi[78]*f->P[15][7] + t->Phi[79]*f->P[16][7] + t->Phi[80]*f->P[17][7] +
-            t->Phi[81]*f->P[18][7] + t->Phi[82]*f->P[19][7] + t->Phi[83]*f->P[20][7];
-    w->M[8] = t->Phi[63]*f->P[0][8] + t->Phi[64]*f->P[1][8] + t->Phi[65]*f->P[2][8] +
-            t->Phi[66]*f->P[3][8] + t->Phi[67]*f->P[4][8] + t->Phi[68]*f->P[5][8] +
-            t->Phi[69]*f->P[6][8] + t->Phi[70]*f->P[7][8] + t->Phi[71]*f->P[8][8] +
-            t->Phi[72]*f->P[9][8] + t->Phi[73]*f->P[10][8] + t->Phi[74]*f->P[11][8] +
-            t->Phi[75]*f->P[12][8] + t->Phi[76]*f->P[13][8] + t->Phi[77]*f->P[14][8] +
-            t->Phi[78]*f->P[15][8] + t->Phi[79]*f->P[16][8] + t->Phi[80]*f->P[17][8] +
-            t->Phi[81]*f->P[18][8] + t->Phi[82]*f->P[19][8] + t->Phi[83]*f->P[20][8];
-    w->M[9] = t->Phi[63]*f->P[0][9] + t->Phi[64]*f->P[1][9] + t->Phi[65]*f->P[2][9] +
-            t->Phi[66]*f->P[3][9] + t->Phi[67]*f->P[4][9] + t->Phi[68]*f->P[5][9] +
-            t->Phi[69]*f->P[6][9] + t->Phi[70]*f->P[7][9] + t->Phi[71]*f->P[8][9] +
-            t->Phi[72]*f->P[9][9] + t->Phi[73]*f->P[10][9] + t->Phi[74]*f->P[11][9] +
-            t->Phi[75]*f->P[12][9] + t->Phi[76]*f->P[13][9] + t->Phi[77]*f->P[14][9] +
-            t->Phi[78]*f->P[15][9] + t->Phi[79]*f->P[16][9] + t->Phi[80]*f->P[17][9] +
-            t->Phi[81]*f->P[18][9] + t->Phi[82]*f->P[19][9] + t->Phi[83]*f->P[20][9];
-    w->M[10] = t->Phi[63]*f->P[0][10] + t->Phi[64]*f->P[1][10] + t->Phi[65]*f->P[2][10] +
-            t->Phi[66]*f->P[3][10] + t->Phi[67]*f->P[4][10] + t->Phi[68]*f->P[5][10] +
-            t->Phi[69]*f->P[6][10] + t->Phi[70]*f->P[7][10] + t->Phi[71]*f->P[8][10] +
-            t->Phi[72]*f->P[9][10] + t->Phi[73]*f->P[10][10] + t->Phi[74]*f->P[11][10] +
-            t->Phi[75]*f->P[12][10] + t->Phi[76]*f->P[13][10] + t->Phi[77]*f->P[14][10] +
-            t->Phi[78]*f->P[15][10] + t->Phi[79]*f->P[16][10] + t->Phi[80]*f->P[17][10] +
-            t->Phi[81]*f->P[18][10] + t->Phi[82]*f->P[19][10] + t->Phi[83]*f->P[20][10];
-    w->M[11] = t->Phi[63]*f->P[0][11] + t->Phi[64]*f->P[1][11] + t->Phi[65]*f->P[2][11] +
-            t->Phi[66]*f->P[3][11] + t->Phi[67]*f->P[4][11] + t->Phi[68]*f->P[5][11] +
-            t->Phi[69]*f->P[6][11] + t->Phi[70]*f->P[7][11] + t->Phi[71]*f->P[8][11] +
-            t->Phi[72]*f->P[9][11] + t->Phi[73]*f->P[10][11] + t->Phi[74]*f->P[11][11] +
-            t->Phi[75]*f->P[12][11] + t->Phi[76]*f->P[13][11] + t->Phi[77]*f->P[14][11] +
-            t->Phi[78]*f->P[15][11] + t->Phi[79]*f->P[16][11] + t->Phi[80]*f->P[17][11] +
-            t->Phi[81]*f->P[18][11] + t->Phi[82]*f->P[19][11] + t->Phi[83]*f->P[20][11];
-    w->M[12] = t->Phi[63]*f->P[0][12] + t->Phi[64]*f->P[1][12] + t->Phi[65]*f->P[2][12] +
-            t->Phi[66]*f->P[3][12] + t->Phi[67]*f->P[4][12] + t->Phi[68]*f->P[5][12] +
-            t->Phi[69]*f->P[6][12] + t->Phi[70]*f->P[7][12] + t->Phi[71]*f->P[8][12] +
-            t->Phi[72]*f->P[9][12] + t->Phi[73]*f->P[10][12] + t->Phi[74]*f->P[11][12] +
-            t->Phi[75]*f->P[12][12] + t->Phi[76]*f->P[13][12] + t->Phi[77]*f->P[14][12] +
-            t->Phi[78]*f->P[15][12] + t->Phi[79]*f->P[16][12] + t->Phi[80]*f->P[17][12] +
-            t->Phi[81]*f->P[18][12] + t->Phi[82]*f->P[19][12] + t->Phi[83]*f->P[20][12];
-    w->M[13] = t->Phi[63]*f->P[0][13] + t->Phi[64]*f->P[1][13] + t->Phi[65]*f->P[2][13] +
-            t->Phi[66]*f->P[3][13] + t->Phi[67]*f->P[4][13] + t->Phi[68]*f->P[5][13] +
-            t->Phi[69]*f->P[6][13] + t->Phi[70]*f->P[7][13] + t->Phi[71]*f->P[8][13] +
-            t->Phi[72]*f->P[9][13] + t->Phi[73]*f->P[10][13] + t->Phi[74]*f->P[11][13] +
-            t->Phi[75]*f->P[12][13] + t->Phi[76]*f->P[13][13] + t->Phi[77]*f->P[14][13] +
-            t->Phi[78]*f->P[15][13] + t->Phi[79]*f->P[16][13] + t->Phi[80]*f->P[17][13] +
-            t->Phi[81]*f->P[18][13] + t->Phi[82]*f->P[19][13] + t->Phi[83]*f->P[20][13];
-    w->M[14] = t->Phi[63]*f->P[0][14] + t->Phi[64]*f->P[1][14] + t->Phi[65]*f->P[2][14] +
-            t->Phi[66]*f->P[3][14] + t->Phi[67]*f->P[4][14] + t->Phi[68]*f->P[5][14] +
-            t->Phi[69]*f->P[6][14] + t->Phi[70]*f->P[7][14] + t->Phi[71]*f->P[8][14] +
-            t->Phi[72]*f->P[9][14] + t->Phi[73]*f->P[10][14] + t->Phi[74]*f->P[11][14] +
-            t->Phi[75]*f->P[12][14] + t->Phi[76]*f->P[13][14] + t->Phi[77]*f->P[14][14] +
-            t->Phi[78]*f->P[15][14] + t->Phi[79]*f->P[16][14] + t->Phi[80]*f->P[17][14] +
-            t->Phi[81]*f->P[18][14] + t->Phi[82]*f->P[19][14] + t->Phi[83]*f->P[20][14];
-    w->M[15] = t->Phi[63]*f->P[0][15] + t->Phi[64]*f->P[1][15] + t->Phi[65]*f->P[2][15] +
-            t->Phi[66]*f->P[3][15] + t->Phi[67]*f->P[4][15] + t->Phi[68]*f->P[5][15] +
-            t->Phi[69]*f->P[6][15] + t->Phi[70]*f->P[7][15] + t->Phi[71]*f->P[8][15] +
-            t->Phi[72]*f->P[9][15] + t->Phi[73]*f->P[10][15] + t->Phi[74]*f->P[11][15] +
-            t->Phi[75]*f->P[12][15] + t->Phi[76]*f->P[13][15] + t->Phi[77]*f->P[14][15] +
-            t->Phi[78]*f->P[15][15] + t->Phi[79]*f->P[16][15] + t->Phi[80]*f->P[17][15] +
-            t->Phi[81]*f->P[18][15] + t->Phi[82]*f->P[19][15] + t->Phi[83]*f->P[20][15];
-    w->M[16] = t->Phi[63]*f->P[0][16] + t->Phi[64]*f->P[1][16] + t->Phi[65]*f->P[2][16] +
-            t->Phi[66]*f->P[3][16] + t->Phi[67]*f->P[4][16] + t->Phi[68]*f->P[5][16] +
-            t->Phi[69]*f->P[6][16] + t->Phi[70]*f->P[7][16] + t->Phi[71]*f->P[8][16] +
-            t->Phi[72]*f->P[9][16] + t->Phi[73]*f->P[10][16] + t->Phi[74]*f->P[11][16] +
-            t->Phi[75]*f->P[12][16] + t->Phi[76]*f->P[13][16] + t->Phi[77]*f->P[14][16] +
-            t->Phi[78]*f->P[15][16] + t->Phi[79]*f->P[16][16] + t->Phi[80]*f->P[17][16] +
-            t->Phi[81]*f->P[18][16] + t->Phi[82]*f->P[19][16] + t->Phi[83]*f->P[20][16];
-    w->M[17] = t->Phi[63]*f->P[0][17] + t->Phi[64]*f->P[1][17] + t->Phi[65]*f->P[2][17] +
-            t->Phi[66]*f->P[3][17] + t->Phi[67]*f->P[4][17] + t->Phi[68]*f->P[5][17] +
-            t->Phi[69]*f->P[6][17] + t->Phi[70]*f->P[7][17] + t->Phi[71]*f->P[8][17] +
-            t->Phi[72]*f->P[9][17] + t->Phi[73]*f->P[10][17] + t->Phi[74]*f->P[11][17] +
-            t->Phi[75]*f->P[12][17] + t->Phi[76]*f->P[13][17] + t->Phi[77]*f->P[14][17] +
-            t->Phi[78]*f->P[15][17] + t->Phi[79]*f->P[16][17] + t->Phi[80]*f->P[17][17] +
-            t->Phi[81]*f->P[18][17] + t->Phi[82]*f->P[19][17] + t->Phi[83]*f->P[20][17];
-    w->M[18] = t->Phi[63]*f->P[0][18] + t->Phi[64]*f->P[1][18] + t->Phi[65]*f->P[2][18] +
-            t->Phi[66]*f->P[3][18] + t->Phi[67]*f->P[4][18] + t->Phi[68]*f->P[5][18] +
-            t->Phi[69]*f->P[6][18] + t->Phi[70]*f->P[7][18] + t->Phi[71]*f->P[8][18] +
-            t->Phi[72]*f->P[9][18] + t->Phi[73]*f->P[10][18] + t->Phi[74]*f->P[11][18] +
-            t->Phi[75]*f->P[12][18] + t->Phi[76]*f->P[13][18] + t->Phi[77]*f->P[14][18] +
-            t->Phi[78]*f->P[15][18] + t->Phi[79]*f->P[16][18] + t->Phi[80]*f->P[17][18] +
-            t->Phi[81]*f->P[18][18] + t->Phi[82]*f->P[19][18] + t->Phi[83]*f->P[20][18];
-    w->M[19] = t->Phi[63]*f->P[0][19] + t->Phi[64]*f->P[1][19] + t->Phi[65]*f->P[2][19] +
-            t->Phi[66]*f->P[3][19] + t->Phi[67]*f->P[4][19] + t->Phi[68]*f->P[5][19] +
-            t->Phi[69]*f->P[6][19] + t->Phi[70]*f->P[7][19] + t->Phi[71]*f->P[8][19] +
-            t->Phi[72]*f->P[9][19] + t->Phi[73]*f->P[10][19] + t->Phi[74]*f->P[11][19] +
-            t->Phi[75]*f->P[12][19] + t->Phi[76]*f->P[13][19] + t->Phi[77]*f->P[14][19] +
-            t->Phi[78]*f->P[15][19] + t->Phi[79]*f->P[16][19] + t->Phi[80]*f->P[17][19] +
-            t->Phi[81]*f->P[18][19] + t->Phi[82]*f->P[19][19] + t->Phi[83]*f->P[20][19];
+    int c;
+    lane_pair b[21];
+    b[0] = lane_pair_of(t->Phi[63], t->Phi[63]);
+    b[1] = lane_pair_of(t->Phi[64], t->Phi[64]);
+    b[2] = lane_pair_of(t->Phi[65], t->Phi[65]);
+    b[3] = lane_pair_of(t->Phi[66], t->Phi[66]);
+    b[4] = lane_pair_of(t->Phi[67], t->Phi[67]);
+    b[5] = lane_pair_of(t->Phi[68], t->Phi[68]);
+    b[6] = lane_pair_of(t->Phi[69], t->Phi[69]);
+    b[7] = lane_pair_of(t->Phi[70], t->Phi[70]);
+    b[8] = lane_pair_of(t->Phi[71], t->Phi[71]);
+    b[9] = lane_pair_of(t->Phi[72], t->Phi[72]);
+    b[10] = lane_pair_of(t->Phi[73], t->Phi[73]);
+    b[11] = lane_pair_of(t->Phi[74], t->Phi[74]);
+    b[12] = lane_pair_of(t->Phi[75], t->Phi[75]);
+    b[13] = lane_pair_of(t->Phi[76], t->Phi[76]);
+    b[14] = lane_pair_of(t->Phi[77], t->Phi[77]);
+    b[15] = lane_pair_of(t->Phi[78], t->Phi[78]);
+    b[16] = lane_pair_of(t->Phi[79], t->Phi[79]);
+    b[17] = lane_pair_of(t->Phi[80], t->Phi[80]);
+    b[18] = lane_pair_of(t->Phi[81], t->Phi[81]);
+    b[19] = lane_pair_of(t->Phi[82], t->Phi[82]);
+    b[20] = lane_pair_of(t->Phi[83], t->Phi[83]);
+    for (c = 0; c + 1 < 21; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[16][c]));
+        acc = lane_pair_add_product(acc, b[17], lane_pair_load(&f->P[17][c]));
+        acc = lane_pair_add_product(acc, b[18], lane_pair_load(&f->P[18][c]));
+        acc = lane_pair_add_product(acc, b[19], lane_pair_load(&f->P[19][c]));
+        acc = lane_pair_add_product(acc, b[20], lane_pair_load(&f->P[20][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[20] = t->Phi[63]*f->P[0][20] + t->Phi[64]*f->P[1][20] + t->Phi[65]*f->P[2][20] +
             t->Phi[66]*f->P[3][20] + t->Phi[67]*f->P[4][20] + t->Phi[68]*f->P[5][20] +
             t->Phi[69]*f->P[6][20] + t->Phi[70]*f->P[7][20] + t->Phi[71]*f->P[8][20] +
@@ -5157,146 +4929,53 @@ INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_3(const ins_gnss21_transition *
 INS_GNSS21_BLOCK void phi_times_p_row_4(const ins_gnss21_filter *restrict f, const
         ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[84]*f->P[0][0] + t->Phi[85]*f->P[1][0] + t->Phi[86]*f->P[2][0] +
-            t->Phi[87]*f->P[3][0] + t->Phi[88]*f->P[4][0] + t->Phi[89]*f->P[5][0] +
-            t->Phi[90]*f->P[6][0] + t->Phi[91]*f->P[7][0] + t->Phi[92]*f->P[8][0] +
-            t->Phi[93]*f->P[9][0] + t->Phi[94]*f->P[10][0] + t->Phi[95]*f->P[11][0] +
-            t->Phi[96]*f->P[12][0] + t->Phi[97]*f->P[13][0] + t->Phi[98]*f->P[14][0] +
-            t->Phi[99]*f->P[15][0] + t->Phi[100]*f->P[16][0] + t->Phi[101]*f->P[17][0] +
-            t->Phi[102]*f->P[18][0] + t->Phi[103]*f->P[19][0] + t->Phi[104]*f->P[20][0];
-    w->M[1] = t->Phi[84]*f->P[0][1] + t->Phi[85]*f->P[1][1] + t->Phi[86]*f->P[2][1] +
-            t->Phi[87]*f->P[3][1] + t->Phi[88]*f->P[4][1] + t->Phi[89]*f->P[5][1] +
-            t->Phi[90]*f->P[6][1] + t->Phi[91]*f->P[7][1] + t->Phi[92]*f->P[8][1] +
-            t->Phi[93]*f->P[9][1] + t->Phi[94]*f->P[10][1] + t->Phi[95]*f->P[11][1] +
-            t->Phi[96]*f->P[12][1] + t->Phi[97]*f->P[13][1] + t->Phi[98]*f->P[14][1] +
-            t->Phi[99]*f->P[15][1] + t->Phi[100]*f->P[16][1] + t->Phi[101]*f->P[17][1] +
-            t->Phi[102]*f->P[18][1] + t->Phi[103]*f->P[19][1] + t->Phi[104]*f->P[20][1];
-    w->M[2] = t->Phi[84]*f->P[0][2] + t->Phi[85]*f->P[1][2] + t->Phi[86]*f->P[2][2] +
-            t->Phi[87]*f->P[3][2] + t->Phi[88]*f->P[4][2] + t->Phi[89]*f->P[5][2] +
-            t->Phi[90]*f->P[6][2] + t->Phi[91]*f->P[7][2] + t->Phi[92]*f->P[8][2] +
-            t->Phi[93]*f->P[9][2] + t->Phi[94]*f->P[10][2] + t->Phi[95]*f->P[11][2] +
-            t->Phi[96]*f->P[12][2] + t->Phi[97]*f->P[13][2] + t->Phi[98]*f->P[14][2] +
-            t->Phi[99]*f->P[15][2] + t->Phi[100]*f->P[16][2] + t->Phi[101]*f->P[17][2] +
-            t->Phi[102]*f->P[18][2] + t->Phi[103]*f->P[19][2] + t->Phi[104]*f->P[20][2];
-    w->M[3] = t->Phi[84]*f->P[0][3] + t->Phi[85]*f->P[1][3] + t->Phi[86]*f->P[2][3] +
-            t->Phi[87]*f->P[3][3] + t->Phi[88]*f->P[4][3] + t->Phi[89]*f->P[5][3] +
-            t->Phi[90]*f->P[6][3] + t->Phi[91]*f->P[7][3] + t->Phi[92]*f->P[8][3] +
-            t->Phi[93]*f->P[9][3] + t->Phi[94]*f->P[10][3] + t->Phi[95]*f->P[11][3] +
-            t->Phi[96]*f->P[12][3] + t->Phi[97]*f->P[13][3] + t->Phi[98]*f->P[14][3] +
-            t->Phi[99]*f->P[15][3] + t->Phi[100]*f->P[16][3] + t->Phi[101]*f->P[17][3] +
-            t->Phi[102]*f->P[18][3] + t->Phi[103]*f->P[19][3] + t->Phi[104]*f->P[20][3];
-    w->M[4] = t->Phi[84]*f->P[0][4] + t->Phi[85]*f->P[1][4] + t->Phi[86]*f->P[2][4] +
-            t->Phi[87]*f->P[3][4] + t->Phi[88]*f->P[4][4] + t->Phi[89]*f->P[5][4] +
-            t->Phi[90]*f->P[6][4] + t->Phi[91]*f->P[7][4] + t->Phi[92]*f->P[8][4] +
-            t->Phi[93]*f->P[9][4] + t->Phi[94]*f->P[10][4] + t->Phi[95]*f->P[11][4] +
-            t->Phi[96]*f->P[12][4] + t->Phi[97]*f->P[13][4] + t->Phi[98]*f->P[14][4] +
-            t->Phi[99]*f->P[15][4] + t->Phi[100]*f->P[16][4] + t->Phi[101]*f->P[17][4] +
-            t->Phi[102]*f->P[18][4] + t->Phi[103]*f->P[19][4] + t->Phi[104]*f->P[20][4];
-    w->M[5] = t->Phi[84]*f->P[0][5] + t->Phi[85]*f->P[1][5] + t->Phi[86]*f->P[2][5] +
-            t->Phi[87]*f->P[3][5] + t->Phi[88]*f->P[4][5] + t->Phi[89]*f->P[5][5] +
-            t->Phi[90]*f->P[6][5] + t->Phi[91]*f->P[7][5] + t->Phi[92]*f->P[8][5] +
-            t->Phi[93]*f->P[9][5] + t->Phi[94]*f->P[10][5] + t->Phi[95]*f->P[11][5] +
-            t->Phi[96]*f->P[12][5] + t->Phi[97]*f->P[13][5] + t->Phi[98]*f->P[14][5] +
-            t->Phi[99]*f->P[15][5] + t->Phi[100]*f->P[16][5] + t->Phi[101]*f->P[17][5] +
-            t->Phi[102]*f->P[18][5] + t->Phi[103]*f->P[19][5] + t->Phi[104]*f->P[20][5];
-    w->M[6] = t->Phi[84]*f->P[0][6] + t->Phi[85]*f->P[1][6] + t->Phi[86]*f->P[2][6] +
-            t->Phi[87]*f->P[3][6] + t->Phi[88]*f->P[4][6] + t->Phi[89]*f->P[5][6] +
-            t->Phi[90]*f->P[6][6] + t->Phi[91]*f->P[7][6] + t->Phi[92]*f->P[8][6] +
-            t->Phi[93]*f->P[9][6] + t->Phi[94]*f->P[10][6] + t->Phi[95]*f->P[11][6] +
-            t->Phi[96]*f->P[12][6] + t->Phi[97]*f->P[13][6] + t->Phi[98]*f->P[14][6] +
-            t->Phi[99]*f->P[15][6] + t->Phi[100]*f->P[16][6] + t->Phi[101]*f->P[17][6] +
-            t->Phi[102]*f->P[18][6] + t->Phi[103]*f->P[19][6] + t->Phi[104]*f->P[20][6];
-    w->M[7] = t->Phi[84]*f->P[0][7] + t->Phi[85]*f->P[1][7] + t->Phi[86]*f->P[2][7] +
-            t->Phi[87]*f->P[3][7] + t->Phi[88]*f->P[4][7] + t->Phi[89]*f->P[5][7] +
-            t->Phi[90]*f->P[6][7] + t->Phi[91]*f->P[7][7] + t->Phi[92]*f->P[8][7] +
-            t->Phi[93]*f->P[9][7] + t->Phi[94]*f->P[10][7] + t->Phi[95]*f->P[11][7] +
-            t->Phi[96]*f->P[12][7] + t->Phi[97]*f->P[13][7] + t->Phi[98]*f->P[14][7] +
-            t->Phi[99]*f->P[15][7] + t->Phi[100]*f->P[16][7] + t->Phi[101]*f->P[17][7] +
-            t->Phi[102]*f->P[18][7] + t->Phi[103]*f->P[19][7] + t->Phi[104]*f->P[20][7];
-    w->M[8] = t->Phi[84]*f->P[0][8] + t->Phi[85]*f->P[1][8] + t->Phi[86]*f->P[2][8] +
-            t->Phi[87]*f->P[3][8] + t->Phi[88]*f->P[4][8] + t->Phi[89]*f->P[5][8] +
-            t->Phi[90]*f->P[6][8] + t->Phi[91]*f->P[7][8] + t->Phi[92]*f->P[8][8] +
-            t->Phi[93]*f->P[9][8] + t->Phi[94]*f->P[10][8] + t->Phi[95]*f->P[11][8] +
-            t->Phi[96]*f->P[12][8] + t->Phi[97]*f->P[13][8] + t->Phi[98]*f->P[14][8] +
-            t->Phi[99]*f->P[15][8] + t->Phi[100]*f->P[16][8] + t->Phi[101]*f->P[17][8] +
-            t->Phi[102]*f->P[18][8] + t->Phi[103]*f->P[19][8] + t->Phi[104]*f->P[20][8];
-    w->M[9] = t->Phi[84]*f->P[0][9] + t->Phi[85]*f->P[1][9] + t->Phi[86]*f->P[2][9] +
-            t->Phi[87]*f->P[3][9] + t->Phi[88]*f->P[4][9] + t->Phi[89]*f->P[5][9] +
-            t->Phi[90]*f->P[6][9] + t->Phi[91]*f->P[7][9] + t->Phi[92]*f->P[8][9] +
-            t->Phi[93]*f->P[9][9] + t->Phi[94]*f->P[10][9] + t->Phi[95]*f->P[11][9] +
-            t->Phi[96]*f->P[12][9] + t->Phi[97]*f->P[13][9] + t->Phi[98]*f->P[14][9] +
-            t->Phi[99]*f->P[15][9] + t->Phi[100]*f->P[16][9] + t->Phi[101]*f->P[17][9] +
-            t->Phi[102]*f->P[18][9] + t->Phi[103]*f->P[19][9] + t->Phi[104]*f->P[20][9];
-    w->M[10] = t->Phi[84]*f->P[0][10] + t->Phi[85]*f->P[1][10] + t->Phi[86]*f->P[2][10] +
-            t->Phi[87]*f->P[3][10] + t->Phi[88]*f->P[4][10] + t->Phi[89]*f->P[5][10] +
-            t->Phi[90]*f->P[6][10] + t->Phi[91]*f->P[7][10] + t->Phi[92]*f->P[8][10] +
-            t->Phi[93]*f->P[9][10] + t->Phi[94]*f->P[10][10] + t->Phi[95]*f->P[11][10] +
-            t->Phi[96]*f->P[12][10] + t->Phi[97]*f->P[13][10] + t->Phi[98]*f->P[14][10] +
-            t->Phi[99]*f->P[15][10] + t->Phi[100]*f->P[16][10] + t->Phi[101]*f->P[17][10] +
-            t->Phi[102]*f->P[18][10] + t->Phi[103]*f->P[19][10] + t->Phi[104]*f->P[20][10];
-    w->M[11] = t->Phi[84]*f->P[0][11] + t->Phi[85]*f->P[1][11] + t->Phi[86]*f->P[2][11] +
-            t->Phi[87]*f->P[3][11] + t->Phi[88]*f->P[4][11] + t->Phi[89]*f->P[5][11] +
-            t->Phi[90]*f->P[6][11] + t->Phi[91]*f->P[7][11] + t->Phi[92]*f->P[8][11] +
-            t->Phi[93]*f->P[9][11] + t->Phi[94]*f->P[10][11] + t->Phi[95]*f->P[11][11] +
-            t->Phi[96]*f->P[12][11] + t->Phi[97]*f->P[13][11] + t->Phi[98]*f->P[14][11] +
-            t->Phi[99]*f->P[15][11] + t->Phi[100]*f->P[16][11] + t->Phi[101]*f->P[17][11] +
-            t->Phi[102]*f->P[18][11] + t->Phi[103]*f->P[19][11] + t->Phi[104]*f->P[20][11];
-    w->M[12] = t->Phi[84]*f->P[0][12] + t->Phi[85]*f->P[1][12] + t->Phi[86]*f->P[2][12] +
-            t->Phi[87]*f->P[3][12] + t->Phi[88]*f->P[4][12] + t->Phi[89]*f->P[5][12] +
-            t->Phi[90]*f->P[6][12] + t->Phi[91]*f->P[7][12] + t->Phi[92]*f->P[8][12] +
-            t->Phi[93]*f->P[9][12] + t->Phi[94]*f->P[10][12] + t->Phi[95]*f->P[11][12] +
-            t->Phi[96]*f->P[12][12] + t->Phi[97]*f->P[13][12] + t->Phi[98]*f->P[14][12] +
-            t->Phi[99]*f->P[15][12] + t->Phi[100]*f->P[16][12] + t->Phi[101]*f->P[17][12] +
-            t->Phi[102]*f->P[18][12] + t->Phi[103]*f->P[19][12] + t->Phi[104]*f->P[20][12];
-    w->M[13] = t->Phi[84]*f->P[0][13] + t->Phi[85]*f->P[1][13] + t->Phi[86]*f->P[2][13] +
-            t->Phi[87]*f->P[3][13] + t->Phi[88]*f->P[4][13] + t->Phi[89]*f->P[5][13] +
-            t->Phi[90]*f->P[6][13] + t->Phi[91]*f->P[7][13] + t->Phi[92]*f->P[8][13] +
-            t->Phi[93]*f->P[9][13] + t->Phi[94]*f->P[10][13] + t->Phi[95]*f->P[11][13] +
-            t->Phi[96]*f->P[12][13] + t->Phi[97]*f->P[13][13] + t->Phi[98]*f->P[14][13] +
-            t->Phi[99]*f->P[15][13] + t->Phi[100]*f->P[16][13] + t->Phi[101]*f->P[17][13] +
-            t->Phi[102]*f->P[18][13] + t->Phi[103]*f->P[19][13] + t->Phi[104]*f->P[20][13];
-    w->M[14] = t->Phi[84]*f->P[0][14] + t->Phi[85]*f->P[1][14] + t->Phi[86]*f->P[2][14] +
-            t->Phi[87]*f->P[3][14] + t->Phi[88]*f->P[4][14] + t->Phi[89]*f->P[5][14] +
-            t->Phi[90]*f->P[6][14] + t->Phi[91]*f->P[7][14] + t->Phi[92]*f->P[8][14] +
-            t->Phi[93]*f->P[9][14] + t->Phi[94]*f->P[10][14] + t->Phi[95]*f->P[11][14] +
-            t->Phi[96]*f->P[12][14] + t->Phi[97]*f->P[13][14] + t->Phi[98]*f->P[14][14] +
-            t->Phi[99]*f->P[15][14] + t->Phi[100]*f->P[16][14] + t->Phi[101]*f->P[17][14] +
-            t->Phi[102]*f->P[18][14] + t->Phi[103]*f->P[19][14] + t->Phi[104]*f->P[20][14];
-    w->M[15] = t->Phi[84]*f->P[0][15] + t->Phi[85]*f->P[1][15] + t->Phi[86]*f->P[2][15] +
-            t->Phi[87]*f->P[3][15] + t->Phi[88]*f->P[4][15] + t->Phi[89]*f->P[5][15] +
-            t->Phi[90]*f->P[6][15] + t->Phi[91]*f->P[7][15] + t->Phi[92]*f->P[8][15] +
-            t->Phi[93]*f->P[9][15] + t->Phi[94]*f->P[10][15] + t->Phi[95]*f->P[11][15] +
-            t->Phi[96]*f->P[12][15] + t->Phi[97]*f->P[13][15] + t->Phi[98]*f->P[14][15] +
-            t->Phi[99]*f->P[15][15] + t->Phi[100]*f->P[16][15] + t->Phi[101]*f->P[17][15] +
-            t->Phi[102]*f->P[18][15] + t->Phi[103]*f->P[19][15] + t->Phi[104]*f->P[20][15];
-    w->M[16] = t->Phi[84]*f->P[0][16] + t->Phi[85]*f->P[1][16] + t->Phi[86]*f->P[2][16] +
-            t->Phi[87]*f->P[3][16] + t->Phi[88]*f->P[4][16] + t->Phi[89]*f->P[5][16] +
-            t->Phi[90]*f->P[6][16] + t->Phi[91]*f->P[7][16] + t->Phi[92]*f->P[8][16] +
-            t->Phi[93]*f->P[9][16] + t->Phi[94]*f->P[10][16] + t->Phi[95]*f->P[11][16] +
-            t->Phi[96]*f->P[12][16] + t->Phi[97]*f->P[13][16] + t->Phi[98]*f->P[14][16] +
-            t->Phi[99]*f->P[15][16] + t->Phi[100]*f->P[16][16] + t->Phi[101]*f->P[17][16] +
-            t->Phi[102]*f->P[18][16] + t->Phi[103]*f->P[19][16] + t->Phi[104]*f->P[20][16];
-    w->M[17] = t->Phi[84]*f->P[0][17] + t->Phi[85]*f->P[1][17] + t->Phi[86]*f->P[2][17] +
-            t->Phi[87]*f->P[3][17] + t->Phi[88]*f->P[4][17] + t->Phi[89]*f->P[5][17] +
-            t->Phi[90]*f->P[6][17] + t->Phi[91]*f->P[7][17] + t->Phi[92]*f->P[8][17] +
-            t->Phi[93]*f->P[9][17] + t->Phi[94]*f->P[10][17] + t->Phi[95]*f->P[11][17] +
-            t->Phi[96]*f->P[12][17] + t->Phi[97]*f->P[13][17] + t->Phi[98]*f->P[14][17] +
-            t->Phi[99]*f->P[15][17] + t->Phi[100]*f->P[16][17] + t->Phi[101]*f->P[17][17] +
-            t->Phi[102]*f->P[18][17] + t->Phi[103]*f->P[19][17] + t->Phi[104]*f->P[20][17];
-    w->M[18] = t->Phi[84]*f->P[0][18] + t->Phi[85]*f->P[1][18] + t->Phi[86]*f->P[2][18] +
-            t->Phi[87]*f->P[3][18] + t->Phi[88]*f->P[4][18] + t->Phi[89]*f->P[5][18] +
-            t->Phi[90]*f->P[6][18] + t->Phi[91]*f->P[7][18] + t->Phi[92]*f->P[8][18] +
-            t->Phi[93]*f->P[9][18] + t->Phi[94]*f->P[10][18] + t->Phi[95]*f->P[11][18] +
-            t->Phi[96]*f->P[12][18] + t->Phi[97]*f->P[13][18] + t->Phi[98]*f->P[14][18] +
-            t->Phi[99]*f->P[15][18] + t->Phi[100]*f->P[16][18] + t->Phi[101]*f->P[17][18] +
-            t->Phi[102]*f->P[18][18] + t->Phi[103]*f->P[19][18] + t->Phi[104]*f->P[20][18];
-    w->M[19] = t->Phi[84]*f->P[0][19] + t->Phi[85]*f->P[1][19] + t->Phi[86]*f->P[2][19] +
-            t->Phi[87]*f->P[3][19] + t->Phi[88]*f->P[4][19] + t->Phi[89]*f->P[5][19] +
-            t->Phi[90]*f->P[6][19] + t->Phi[91]*f->P[7][19] + t->Phi[92]*f->P[8][19] +
-            t->Phi[93]*f->P[9][19] + t->Phi[94]*f->P[10][19] + t->Phi[95]*f->P[11][19] +
-            t->Phi[96]*f->P[12][19] + t->Phi[97]*f->P[13][19] + t->Phi[98]*f->P[14][19] +
-            t->Phi[99]*f->P[15][19] + t->Phi[100]*f->P[16][19] + t->Phi[101]*f->P[17][19] +
-            t->Phi[102]*f->P[18][19] + t->Phi[103]*f->P[19][19] + t->Phi[104]*f->P[20][19];
+    int c;
+    lane_pair b[21];
+    b[0] = lane_pair_of(t->Phi[84], t->Phi[84]);
+    b[1] = lane_pair_of(t->Phi[85], t->Phi[85]);
+    b[2] = lane_pair_of(t->Phi[86], t->Phi[86]);
+    b[3] = lane_pair_of(t->Phi[87], t->Phi[87]);
+    b[4] = lane_pair_of(t->Phi[88], t->Phi[88]);
+    b[5] = lane_pair_of(t->Phi[89], t->Phi[89]);
+    b[6] = lane_pair_of(t->Phi[90], t->Phi[90]);
+    b[7] = lane_pair_of(t->Phi[91], t->Phi[91]);
+    b[8] = lane_pair_of(t->Phi[92], t->Phi[92]);
+    b[9] = lane_pair_of(t->Phi[93], t->Phi[93]);
+    b[10] = lane_pair_of(t->Phi[94], t->Phi[94]);
+    b[11] = lane_pair_of(t->Phi[95], t->Phi[95]);
+    b[12] = lane_pair_of(t->Phi[96], t->Phi[96]);
+    b[13] = lane_pair_of(t->Phi[97], t->Phi[97]);
+    b[14] = lane_pair_of(t->Phi[98], t->Phi[98]);
+    b[15] = lane_pair_of(t->Phi[99], t->Phi[99]);
+    b[16] = lane_pair_of(t->Phi[100], t->Phi[100]);
+    b[17] = lane_pair_of(t->Phi[101], t->Phi[101]);
+    b[18] = lane_pair_of(t->Phi[102], t->Phi[102]);
+    b[19] = lane_pair_of(t->Phi[103], t->Phi[103]);
+    b[20] = lane_pair_of(t->Phi[104], t->Phi[104]);
+    for (c = 0; c + 1 < 21; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[16][c]));
+        acc = lane_pair_add_product(acc, b[17], lane_pair_load(&f->P[17][c]));
+        acc = lane_pair_add_product(acc, b[18], lane_pair_load(&f->P[18][c]));
+        acc = lane_pair_add_product(acc, b[19], lane_pair_load(&f->P[19][c]));
+        acc = lane_pair_add_product(acc, b[20], lane_pair_load(&f->P[20][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[20] = t->Phi[84]*f->P[0][20] + t->Phi[85]*f->P[1][20] + t->Phi[86]*f->P[2][20] +
             t->Phi[87]*f->P[3][20] + t->Phi[88]*f->P[4][20] + t->Phi[89]*f->P[5][20] +
             t->Phi[90]*f->P[6][20] + t->Phi[91]*f->P[7][20] + t->Phi[92]*f->P[8][20] +
@@ -5386,146 +5065,53 @@ INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_4(const ins_gnss21_transition *
 INS_GNSS21_BLOCK void phi_times_p_row_5(const ins_gnss21_filter *restrict f, const
         ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[105]*f->P[0][0] + t->Phi[106]*f->P[1][0] + t->Phi[107]*f->P[2][0] +
-            t->Phi[108]*f->P[3][0] + t->Phi[109]*f->P[4][0] + t->Phi[110]*f->P[5][0] +
-            t->Phi[111]*f->P[6][0] + t->Phi[112]*f->P[7][0] + t->Phi[113]*f->P[8][0] +
-            t->Phi[114]*f->P[9][0] + t->Phi[115]*f->P[10][0] + t->Phi[116]*f->P[11][0] +
-            t->Phi[117]*f->P[12][0] + t->Phi[118]*f->P[13][0] + t->Phi[119]*f->P[14][0] +
-            t->Phi[120]*f->P[15][0] + t->Phi[121]*f->P[16][0] + t->Phi[122]*f->P[17][0] +
-            t->Phi[123]*f->P[18][0] + t->Phi[124]*f->P[19][0] + t->Phi[125]*f->P[20][0];
-    w->M[1] = t->Phi[105]*f->P[0][1] + t->Phi[106]*f->P[1][1] + t->Phi[107]*f->P[2][1] +
-            t->Phi[108]*f->P[3][1] + t->Phi[109]*f->P[4][1] + t->Phi[110]*f->P[5][1] +
-            t->Phi[111]*f->P[6][1] + t->Phi[112]*f->P[7][1] + t->Phi[113]*f->P[8][1] +
-            t->Phi[114]*f->P[9][1] + t->Phi[115]*f->P[10][1] + t->Phi[116]*f->P[11][1] +
-            t->Phi[117]*f->P[12][1] + t->Phi[118]*f->P[13][1] + t->Phi[119]*f->P[14][1] +
-            t->Phi[120]*f->P[15][1] + t->Phi[121]*f->P[16][1] + t->Phi[122]*f->P[17][1] +
-            t->Phi[123]*f->P[18][1] + t->Phi[124]*f->P[19][1] + t->Phi[125]*f->P[20][1];
-    w->M[2] = t->Phi[105]*f->P[0][2] + t->Phi[106]*f->P[1][2] + t->Phi[107]*f->P[2][2] +
-            t->Phi[108]*f->P[3][2] + t->Phi[109]*f->P[4][2] + t->Phi[110]*f->P[5][2] +
-            t->Phi[111]*f->P[6][2] + t->Phi[112]*f->P[7][2] + t->Phi[113]*f->P[8][2] +
-            t->Phi[114]*f->P[9][2] + t->Phi[115]*f->P[10][2] + t->Phi[116]*f->P[11][2] +
-            t->Phi[117]*f->P[12][2] + t->Phi[118]*f->P[13][2] + t->Phi[119]*f->P[14][2] +
-            t->Phi[120]*f->P[15][2] + t->Phi[121]*f->P[16][2] + t->Phi[122]*f->P[17][2] +
-            t->Phi[123]*f->P[18][2] + t->Phi[124]*f->P[19][2] + t->Phi[125]*f->P[20][2];
-    w->M[3] = t->Phi[105]*f->P[0][3] + t->Phi[106]*f->P[1][3] + t->Phi[107]*f->P[2][3] +
-            t->Phi[108]*f->P[3][3] + t->Phi[109]*f->P[4][3] + t->Phi[110]*f->P[5][3] +
-            t->Phi[111]*f->P[6][3] + t->Phi[112]*f->P[7][3] + t->Phi[113]*f->P[8][3] +
-            t->Phi[114]*f->P[9][3] + t->Phi[115]*f->P[10][3] + t->Phi[116]*f->P[11][3] +
-            t->Phi[117]*f->P[12][3] + t->Phi[118]*f->P[13][3] + t->Phi[119]*f->P[14][3] +
-            t->Phi[120]*f->P[15][3] + t->Phi[121]*f->P[16][3] + t->Phi[122]*f->P[17][3] +
-            t->Phi[123]*f->P[18][3] + t->Phi[124]*f->P[19][3] + t->Phi[125]*f->P[20][3];
-    w->M[4] = t->Phi[105]*f->P[0][4] + t->Phi[106]*f->P[1][4] + t->Phi[107]*f->P[2][4] +
-            t->Phi[108]*f->P[3][4] + t->Phi[109]*f->P[4][4] + t->Phi[110]*f->P[5][4] +
-            t->Phi[111]*f->P[6][4] + t->Phi[112]*f->P[7][4] + t->Phi[113]*f->P[8][4] +
-            t->Phi[114]*f->P[9][4] + t->Phi[115]*f->P[10][4] + t->Phi[116]*f->P[11][4] +
-            t->Phi[117]*f->P[12][4] + t->Phi[118]*f->P[13][4] + t->Phi[119]*f->P[14][4] +
-            t->Phi[120]*f->P[15][4] + t->Phi[121]*f->P[16][4] + t->Phi[122]*f->P[17][4] +
-            t->Phi[123]*f->P[18][4] + t->Phi[124]*f->P[19][4] + t->Phi[125]*f->P[20][4];
-    w->M[5] = t->Phi[105]*f->P[0][5] + t->Phi[106]*f->P[1][5] + t->Phi[107]*f->P[2][5] +
-            t->Phi[108]*f->P[3][5] + t->Phi[109]*f->P[4][5] + t->Phi[110]*f->P[5][5] +
-            t->Phi[111]*f->P[6][5] + t->Phi[112]*f->P[7][5] + t->Phi[113]*f->P[8][5] +
-            t->Phi[114]*f->P[9][5] + t->Phi[115]*f->P[10][5] + t->Phi[116]*f->P[11][5] +
-            t->Phi[117]*f->P[12][5] + t->Phi[118]*f->P[13][5] + t->Phi[119]*f->P[14][5] +
-            t->Phi[120]*f->P[15][5] + t->Phi[121]*f->P[16][5] + t->Phi[122]*f->P[17][5] +
-            t->Phi[123]*f->P[18][5] + t->Phi[124]*f->P[19][5] + t->Phi[125]*f->P[20][5];
-    w->M[6] = t->Phi[105]*f->P[0][6] + t->Phi[106]*f->P[1][6] + t->Phi[107]*f->P[2][6] +
-            t->Phi[108]*f->P[3][6] + t->Phi[109]*f->P[4][6] + t->Phi[110]*f->P[5][6] +
-            t->Phi[111]*f->P[6][6] + t->Phi[112]*f->P[7][6] + t->Phi[113]*f->P[8][6] +
-            t->Phi[114]*f->P[9][6] + t->Phi[115]*f->P[10][6] + t->Phi[116]*f->P[11][6] +
-            t->Phi[117]*f->P[12][6] + t->Phi[118]*f->P[13][6] + t->Phi[119]*f->P[14][6] +
-            t->Phi[120]*f->P[15][6] + t->Phi[121]*f->P[16][6] + t->Phi[122]*f->P[17][6] +
-            t->Phi[123]*f->P[18][6] + t->Phi[124]*f->P[19][6] + t->Phi[125]*f->P[20][6];
-    w->M[7] = t->Phi[105]*f->P[0][7] + t->Phi[106]*f->P[1][7] + t->Phi[107]*f->P[2][7] +
-            t->Phi[108]*f->P[3][7] + t->Phi[109]*f->P[4][7] + t->Phi[110]*f->P[5][7] +
-            t->Phi[111]*f->P[6][7] + t->Phi[112]*f->P[7][7] + t->Phi[113]*f->P[8][7] +
-            t->Phi[114]*f->P[9][7] + t->Phi[115]*f->P[10][7] + t->Phi[116]*f->P[11][7] +
-            t->Phi[117]*f->P[12][7] + t->Phi[118]*f->P[13][7] + t->Phi[119]*f->P[14][7] +
-            t->Phi[120]*f->P[15][7] + t->Phi[121]*f->P[16][7] + t->Phi[122]*f->P[17][7] +
-            t->Phi[123]*f->P[18][7] + t->Phi[124]*f->P[19][7] + t->Phi[125]*f->P[20][7];
-    w->M[8] = t->Phi[105]*f->P[0][8] + t->Phi[106]*f->P[1][8] + t->Phi[107]*f->P[2][8] +
-            t->Phi[108]*f->P[3][8] + t->Phi[109]*f->P[4][8] + t->Phi[110]*f->P[5][8] +
-            t->Phi[111]*f->P[6][8] + t->Phi[112]*f->P[7][8] + t->Phi[113]*f->P[8][8] +
-            t->Phi[114]*f->P[9][8] + t->Phi[115]*f->P[10][8] + t->Phi[116]*f->P[11][8] +
-            t->Phi[117]*f->P[12][8] + t->Phi[118]*f->P[13][8] + t->Phi[119]*f->P[14][8] +
-            t->Phi[120]*f->P[15][8] + t->Phi[121]*f->P[16][8] + t->Phi[122]*f->P[17][8] +
-            t->Phi[123]*f->P[18][8] + t->Phi[124]*f->P[19][8] + t->Phi[125]*f->P[20][8];
-    w->M[9] = t->Phi[105]*f->P[0][9] + t->Phi[106]*f->P[1][9] + t->Phi[107]*f->P[2][9] +
-            t->Phi[108]*f->P[3][9] + t->Phi[109]*f->P[4][9] + t->Phi[110]*f->P[5][9] +
-            t->Phi[111]*f->P[6][9] + t->Phi[112]*f->P[7][9] + t->Phi[113]*f->P[8][9] +
-            t->Phi[114]*f->P[9][9] + t->Phi[115]*f->P[10][9] + t->Phi[116]*f->P[11][9] +
-            t->Phi[117]*f->P[12][9] + t->Phi[118]*f->P[13][9] + t->Phi[119]*f->P[14][9] +
-            t->Phi[120]*f->P[15][9] + t->Phi[121]*f->P[16][9] + t->Phi[122]*f->P[17][9] +
-            t->Phi[123]*f->P[18][9] + t->Phi[124]*f->P[19][9] + t->Phi[125]*f->P[20][9];
-    w->M[10] = t->Phi[105]*f->P[0][10] + t->Phi[106]*f->P[1][10] + t->Phi[107]*f->P[2][10] +
-            t->Phi[108]*f->P[3][10] + t->Phi[109]*f->P[4][10] + t->Phi[110]*f->P[5][10] +
-            t->Phi[111]*f->P[6][10] + t->Phi[112]*f->P[7][10] + t->Phi[113]*f->P[8][10] +
-            t->Phi[114]*f->P[9][10] + t->Phi[115]*f->P[10][10] + t->Phi[116]*f->P[11][10] +
-            t->Phi[117]*f->P[12][10] + t->Phi[118]*f->P[13][10] + t->Phi[119]*f->P[14][10] +
-            t->Phi[120]*f->P[15][10] + t->Phi[121]*f->P[16][10] + t->Phi[122]*f->P[17][10] +
-            t->Phi[123]*f->P[18][10] + t->Phi[124]*f->P[19][10] + t->Phi[125]*f->P[20][10];
-    w->M[11] = t->Phi[105]*f->P[0][11] + t->Phi[106]*f->P[1][11] + t->Phi[107]*f->P[2][11] +
-            t->Phi[108]*f->P[3][11] + t->Phi[109]*f->P[4][11] + t->Phi[110]*f->P[5][11] +
-            t->Phi[111]*f->P[6][11] + t->Phi[112]*f->P[7][11] + t->Phi[113]*f->P[8][11] +
-            t->Phi[114]*f->P[9][11] + t->Phi[115]*f->P[10][11] + t->Phi[116]*f->P[11][11] +
-            t->Phi[117]*f->P[12][11] + t->Phi[118]*f->P[13][11] + t->Phi[119]*f->P[14][11] +
-            t->Phi[120]*f->P[15][11] + t->Phi[121]*f->P[16][11] + t->Phi[122]*f->P[17][11] +
-            t->Phi[123]*f->P[18][11] + t->Phi[124]*f->P[19][11] + t->Phi[125]*f->P[20][11];
-    w->M[12] = t->Phi[105]*f->P[0][12] + t->Phi[106]*f->P[1][12] + t->Phi[107]*f->P[2][12] +
-            t->Phi[108]*f->P[3][12] + t->Phi[109]*f->P[4][12] + t->Phi[110]*f->P[5][12] +
-            t->Phi[111]*f->P[6][12] + t->Phi[112]*f->P[7][12] + t->Phi[113]*f->P[8][12] +
-            t->Phi[114]*f->P[9][12] + t->Phi[115]*f->P[10][12] + t->Phi[116]*f->P[11][12] +
-            t->Phi[117]*f->P[12][12] + t->Phi[118]*f->P[13][12] + t->Phi[119]*f->P[14][12] +
-            t->Phi[120]*f->P[15][12] + t->Phi[121]*f->P[16][12] + t->Phi[122]*f->P[17][12] +
-            t->Phi[123]*f->P[18][12] + t->Phi[124]*f->P[19][12] + t->Phi[125]*f->P[20][12];
-    w->M[13] = t->Phi[105]*f->P[0][13] + t->Phi[106]*f->P[1][13] + t->Phi[107]*f->P[2][13] +
-            t->Phi[108]*f->P[3][13] + t->Phi[109]*f->P[4][13] + t->Phi[110]*f->P[5][13] +
-            t->Phi[111]*f->P[6][13] + t->Phi[112]*f->P[7][13] + t->Phi[113]*f->P[8][13] +
-            t->Phi[114]*f->P[9][13] + t->Phi[115]*f->P[10][13] + t->Phi[116]*f->P[11][13] +
-            t->Phi[117]*f->P[12][13] + t->Phi[118]*f->P[13][13] + t->Phi[119]*f->P[14][13] +
-            t->Phi[120]*f->P[15][13] + t->Phi[121]*f->P[16][13] + t->Phi[122]*f->P[17][13] +
-            t->Phi[123]*f->P[18][13] + t->Phi[124]*f->P[19][13] + t->Phi[125]*f->P[20][13];
-    w->M[14] = t->Phi[105]*f->P[0][14] + t->Phi[106]*f->P[1][14] + t->Phi[107]*f->P[2][14] +
-            t->Phi[108]*f->P[3][14] + t->Phi[109]*f->P[4][14] + t->Phi[110]*f->P[5][14] +
-            t->Phi[111]*f->P[6][14] + t->Phi[112]*f->P[7][14] + t->Phi[113]*f->P[8][14] +
-            t->Phi[114]*f->P[9][14] + t->Phi[115]*f->P[10][14] + t->Phi[116]*f->P[11][14] +
-            t->Phi[117]*f->P[12][14] + t->Phi[118]*f->P[13][14] + t->Phi[119]*f->P[14][14] +
-            t->Phi[120]*f->P[15][14] + t->Phi[121]*f->P[16][14] + t->Phi[122]*f->P[17][14] +
-            t->Phi[123]*f->P[18][14] + t->Phi[124]*f->P[19][14] + t->Phi[125]*f->P[20][14];
-    w->M[15] = t->Phi[105]*f->P[0][15] + t->Phi[106]*f->P[1][15] + t->Phi[107]*f->P[2][15] +
-            t->Phi[108]*f->P[3][15] + t->Phi[109]*f->P[4][15] + t->Phi[110]*f->P[5][15] +
-            t->Phi[111]*f->P[6][15] + t->Phi[112]*f->P[7][15] + t->Phi[113]*f->P[8][15] +
-            t->Phi[114]*f->P[9][15] + t->Phi[115]*f->P[10][15] + t->Phi[116]*f->P[11][15] +
-            t->Phi[117]*f->P[12][15] + t->Phi[118]*f->P[13][15] + t->Phi[119]*f->P[14][15] +
-            t->Phi[120]*f->P[15][15] + t->Phi[121]*f->P[16][15] + t->Phi[122]*f->P[17][15] +
-            t->Phi[123]*f->P[18][15] + t->Phi[124]*f->P[19][15] + t->Phi[125]*f->P[20][15];
-    w->M[16] = t->Phi[105]*f->P[0][16] + t->Phi[106]*f->P[1][16] + t->Phi[107]*f->P[2][16] +
-            t->Phi[108]*f->P[3][16] + t->Phi[109]*f->P[4][16] + t->Phi[110]*f->P[5][16] +
-            t->Phi[111]*f->P[6][16] + t->Phi[112]*f->P[7][16] + t->Phi[113]*f->P[8][16] +
-            t->Phi[114]*f->P[9][16] + t->Phi[115]*f->P[10][16] + t->Phi[116]*f->P[11][16] +
-            t->Phi[117]*f->P[12][16] + t->Phi[118]*f->P[13][16] + t->Phi[119]*f->P[14][16] +
-            t->Phi[120]*f->P[15][16] + t->Phi[121]*f->P[16][16] + t->Phi[122]*f->P[17][16] +
-            t->Phi[123]*f->P[18][16] + t->Phi[124]*f->P[19][16] + t->Phi[125]*f->P[20][16];
-    w->M[17] = t->Phi[105]*f->P[0][17] + t->Phi[106]*f->P[1][17] + t->Phi[107]*f->P[2][17] +
-            t->Phi[108]*f->P[3][17] + t->Phi[109]*f->P[4][17] + t->Phi[110]*f->P[5][17] +
-            t->Phi[111]*f->P[6][17] + t->Phi[112]*f->P[7][17] + t->Phi[113]*f->P[8][17] +
-            t->Phi[114]*f->P[9][17] + t->Phi[115]*f->P[10][17] + t->Phi[116]*f->P[11][17] +
-            t->Phi[117]*f->P[12][17] + t->Phi[118]*f->P[13][17] + t->Phi[119]*f->P[14][17] +
-            t->Phi[120]*f->P[15][17] + t->Phi[121]*f->P[16][17] + t->Phi[122]*f->P[17][17] +
-            t->Phi[123]*f->P[18][17] + t->Phi[124]*f->P[19][17] + t->Phi[125]*f->P[20][17];
-    w->M[18] = t->Phi[105]*f->P[0][18] + t->Phi[106]*f->P[1][18] + t->Phi[107]*f->P[2][18] +
-            t->Phi[108]*f->P[3][18] + t->Phi[109]*f->P[4][18] + t->Phi[110]*f->P[5][18] +
-            t->Phi[111]*f->P[6][18] + t->Phi[112]*f->P[7][18] + t->Phi[113]*f->P[8][18] +
-            t->Phi[114]*f->P[9][18] + t->Phi[115]*f->P[10][18] + t->Phi[116]*f->P[11][18] +
-            t->Phi[117]*f->P[12][18] + t->Phi[118]*f->P[13][18] + t->Phi[119]*f->P[14][18] +
-            t->Phi[120]*f->P[15][18] + t->Phi[121]*f->P[16][18] + t->Phi[122]*f->P[17][18] +
-            t->Phi[123]*f->P[18][18] + t->Phi[124]*f->P[19][18] + t->Phi[125]*f->P[20][18];
-    w->M[19] = t->Phi[105]*f->P[0][19] + t->Phi[106]*f->P[1][19] + t->Phi[107]*f->P[2][19] +
-            t->Phi[108]*f->P[3][19] + t->Phi[109]*f->P[4][19] + t->Phi[110]*f->P[5][19] +
-            t->Phi[111]*f->P[6][19] + t->Phi[112]*f->P[7][19] + t->Phi[113]*f->P[8][19] +
-            t->Phi[114]*f->P[9][19] + t->Phi[115]*f->P[10][19] + t->Phi[116]*f->P[11][19] +
-            t->Phi[117]*f->P[12][19] + t->Phi[118]*f->P[13][19] + t->Phi[119]*f->P[14][19] +
-            t->Phi[120]*f->P[15][19] + t->Phi[121]*f->P[16][19] + t->Phi[122]*f->P[17][19] +
-            t->Phi[123]*f->P[18][19] + t->Phi[124]*f->P[19][19] + t->Phi[125]*f->P[20][19];
+    int c;
+    lane_pair b[21];
+    b[0] = lane_pair_of(t->Phi[105], t->Phi[105]);
+    b[1] = lane_pair_of(t->Phi[106], t->Phi[106]);
+    b[2] = lane_pair_of(t->Phi[107], t->Phi[107]);
+    b[3] = lane_pair_of(t->Phi[108], t->Phi[108]);
+    b[4] = lane_pair_of(t->Phi[109], t->Phi[109]);
+    b[5] = lane_pair_of(t->Phi[110], t->Phi[110]);
+    b[6] = lane_pair_of(t->Phi[111], t->Phi[111]);
+    b[7] = lane_pair_of(t->Phi[112], t->Phi[112]);
+    b[8] = lane_pair_of(t->Phi[113], t->Phi[113]);
+    b[9] = lane_pair_of(t->Phi[114], t->Phi[114]);
+    b[10] = lane_pair_of(t->Phi[115], t->Phi[115]);
+    b[11] = lane_pair_of(t->Phi[116], t->Phi[116]);
+    b[12] = lane_pair_of(t->Phi[117], t->Phi[117]);
+    b[13] = lane_pair_of(t->Phi[118], t->Phi[118]);
+    b[14] = lane_pair_of(t->Phi[119], t->Phi[119]);
+    b[15] = lane_pair_of(t->Phi[120], t->Phi[120]);
+    b[16] = lane_pair_of(t->Phi[121], t->Phi[121]);
+    b[17] = lane_pair_of(t->Phi[122], t->Phi[122]);
+    b[18] = lane_pair_of(t->Phi[123], t->Phi[123]);
+    b[19] = lane_pair_of(t->Phi[124], t->Phi[124]);
+    b[20] = lane_pair_of(t->Phi[125], t->Phi[125]);
+    for (c = 0; c + 1 < 21; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[16][c]));
+        acc = lane_pair_add_product(acc, b[17], lane_pair_load(&f->P[17][c]));
+        acc = lane_pair_add_product(acc, b[18], lane_pair_load(&f->P[18][c]));
+        acc = lane_pair_add_product(acc, b[19], lane_pair_load(&f->P[19][c]));
+        acc = lane_pair_add_product(acc, b[20], lane_pair_load(&f->P[20][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[20] = t->Phi[105]*f->P[0][20] + t->Phi[106]*f->P[1][20] + t->Phi[107]*f->P[2][20] +
             t->Phi[108]*f->P[3][20] + t->Phi[109]*f->P[4][20] + t->Phi[110]*f->P[5][20] +
             t->Phi[111]*f->P[6][20] + t->Phi[112]*f->P[7][20] + t->Phi[113]*f->P[8][20] +
@@ -5604,146 +5190,53 @@ INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_5(const ins_gnss21_transition *
 INS_GNSS21_BLOCK void phi_times_p_row_6(const ins_gnss21_filter *restrict f, const
         ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[126]*f->P[0][0] + t->Phi[127]*f->P[1][0] + t->Phi[128]*f->P[2][0] +
-            t->Phi[129]*f->P[3][0] + t->Phi[130]*f->P[4][0] + t->Phi[131]*f->P[5][0] +
-            t->Phi[132]*f->P[6][0] + t->Phi[133]*f->P[7][0] + t->Phi[134]*f->P[8][0] +
-            t->Phi[135]*f->P[9][0] + t->Phi[136]*f->P[10][0] + t->Phi[137]*f->P[11][0] +
-            t->Phi[138]*f->P[12][0] + t->Phi[139]*f->P[13][0] + t->Phi[140]*f->P[14][0] +
-            t->Phi[141]*f->P[15][0] + t->Phi[142]*f->P[16][0] + t->Phi[143]*f->P[17][0] +
-            t->Phi[144]*f->P[18][0] + t->Phi[145]*f->P[19][0] + t->Phi[146]*f->P[20][0];
-    w->M[1] = t->Phi[126]*f->P[0][1] + t->Phi[127]*f->P[1][1] + t->Phi[128]*f->P[2][1] +
-            t->Phi[129]*f->P[3][1] + t->Phi[130]*f->P[4][1] + t->Phi[131]*f->P[5][1] +
-            t->Phi[132]*f->P[6][1] + t->Phi[133]*f->P[7][1] + t->Phi[134]*f->P[8][1] +
-            t->Phi[135]*f->P[9][1] + t->Phi[136]*f->P[10][1] + t->Phi[137]*f->P[11][1] +
-            t->Phi[138]*f->P[12][1] + t->Phi[139]*f->P[13][1] + t->Phi[140]*f->P[14][1] +
-            t->Phi[141]*f->P[15][1] + t->Phi[142]*f->P[16][1] + t->Phi[143]*f->P[17][1] +
-            t->Phi[144]*f->P[18][1] + t->Phi[145]*f->P[19][1] + t->Phi[146]*f->P[20][1];
-    w->M[2] = t->Phi[126]*f->P[0][2] + t->Phi[127]*f->P[1][2] + t->Phi[128]*f->P[2][2] +
-            t->Phi[129]*f->P[3][2] + t->Phi[130]*f->P[4][2] + t->Phi[131]*f->P[5][2] +
-            t->Phi[132]*f->P[6][2] + t->Phi[133]*f->P[7][2] + t->Phi[134]*f->P[8][2] +
-            t->Phi[135]*f->P[9][2] + t->Phi[136]*f->P[10][2] + t->Phi[137]*f->P[11][2] +
-            t->Phi[138]*f->P[12][2] + t->Phi[139]*f->P[13][2] + t->Phi[140]*f->P[14][2] +
-            t->Phi[141]*f->P[15][2] + t->Phi[142]*f->P[16][2] + t->Phi[143]*f->P[17][2] +
-            t->Phi[144]*f->P[18][2] + t->Phi[145]*f->P[19][2] + t->Phi[146]*f->P[20][2];
-    w->M[3] = t->Phi[126]*f->P[0][3] + t->Phi[127]*f->P[1][3] + t->Phi[128]*f->P[2][3] +
-            t->Phi[129]*f->P[3][3] + t->Phi[130]*f->P[4][3] + t->Phi[131]*f->P[5][3] +
-            t->Phi[132]*f->P[6][3] + t->Phi[133]*f->P[7][3] + t->Phi[134]*f->P[8][3] +
-            t->Phi[135]*f->P[9][3] + t->Phi[136]*f->P[10][3] + t->Phi[137]*f->P[11][3] +
-            t->Phi[138]*f->P[12][3] + t->Phi[139]*f->P[13][3] + t->Phi[140]*f->P[14][3] +
-            t->Phi[141]*f->P[15][3] + t->Phi[142]*f->P[16][3] + t->Phi[143]*f->P[17][3] +
-            t->Phi[144]*f->P[18][3] + t->Phi[145]*f->P[19][3] + t->Phi[146]*f->P[20][3];
-    w->M[4] = t->Phi[126]*f->P[0][4] + t->Phi[127]*f->P[1][4] + t->Phi[128]*f->P[2][4] +
-            t->Phi[129]*f->P[3][4] + t->Phi[130]*f->P[4][4] + t->Phi[131]*f->P[5][4] +
-            t->Phi[132]*f->P[6][4] + t->Phi[133]*f->P[7][4] + t->Phi[134]*f->P[8][4] +
-            t->Phi[135]*f->P[9][4] + t->Phi[136]*f->P[10][4] + t->Phi[137]*f->P[11][4] +
-            t->Phi[138]*f->P[12][4] + t->Phi[139]*f->P[13][4] + t->Phi[140]*f->P[14][4] +
-            t->Phi[141]*f->P[15][4] + t->Phi[142]*f->P[16][4] + t->Phi[143]*f->P[17][4] +
-            t->Phi[144]*f->P[18][4] + t->Phi[145]*f->P[19][4] + t->Phi[146]*f->P[20][4];
-    w->M[5] = t->Phi[126]*f->P[0][5] + t->Phi[127]*f->P[1][5] + t->Phi[128]*f->P[2][5] +
-            t->Phi[129]*f->P[3][5] + t->Phi[130]*f->P[4][5] + t->Phi[131]*f->P[5][5] +
-            t->Phi[132]*f->P[6][5] + t->Phi[133]*f->P[7][5] + t->Phi[134]*f->P[8][5] +
-            t->Phi[135]*f->P[9][5] + t->Phi[136]*f->P[10][5] + t->Phi[137]*f->P[11][5] +
-            t->Phi[138]*f->P[12][5] + t->Phi[139]*f->P[13][5] + t->Phi[140]*f->P[14][5] +
-            t->Phi[141]*f->P[15][5] + t->Phi[142]*f->P[16][5] + t->Phi[143]*f->P[17][5] +
-            t->Phi[144]*f->P[18][5] + t->Phi[145]*f->P[19][5] + t->Phi[146]*f->P[20][5];
-    w->M[6] = t->Phi[126]*f->P[0][6] + t->Phi[127]*f->P[1][6] + t->Phi[128]*f->P[2][6] +
-            t->Phi[129]*f->P[3][6] + t->Phi[130]*f->P[4][6] + t->Phi[131]*f->P[5][6] +
-            t->Phi[132]*f->P[6][6] + t->Phi[133]*f->P[7][6] + t->Phi[134]*f->P[8][6] +
-            t->Phi[135]*f->P[9][6] + t->Phi[136]*f->P[10][6] + t->Phi[137]*f->P[11][6] +
-            t->Phi[138]*f->P[12][6] + t->Phi[139]*f->P[13][6] + t->Phi[140]*f->P[14][6] +
-            t->Phi[141]*f->P[15][6] + t->Phi[142]*f->P[16][6] + t->Phi[143]*f->P[17][6] +
-            t->Phi[144]*f->P[18][6] + t->Phi[145]*f->P[19][6] + t->Phi[146]*f->P[20][6];
-    w->M[7] = t->Phi[126]*f->P[0][7] + t->Phi[127]*f->P[1][7] + t->Phi[128]*f->P[2][7] +
-            t->Phi[129]*f->P[3][7] + t->Phi[130]*f->P[4][7] + t->Phi[131]*f->P[5][7] +
-            t->Phi[132]*f->P[6][7] + t->Phi[133]*f->P[7][7] + t->Phi[134]*f->P[8][7] +
-            t->Phi[135]*f->P[9][7] + t->Phi[136]*f->P[10][7] + t->Phi[137]*f->P[11][7] +
-            t->Phi[138]*f->P[12][7] + t->Phi[139]*f->P[13][7] + t->Phi[140]*f->P[14][7] +
-            t->Phi[141]*f->P[15][7] + t->Phi[142]*f->P[16][7] + t->Phi[143]*f->P[17][7] +
-            t->Phi[144]*f->P[18][7] + t->Phi[145]*f->P[19][7] + t->Phi[146]*f->P[20][7];
-    w->M[8] = t->Phi[126]*f->P[0][8] + t->Phi[127]*f->P[1][8] + t->Phi[128]*f->P[2][8] +
-            t->Phi[129]*f->P[3][8] + t->Phi[130]*f->P[4][8] + t->Phi[131]*f->P[5][8] +
-            t->Phi[132]*f->P[6][8] + t->Phi[133]*f->P[7][8] + t->Phi[134]*f->P[8][8] +
-            t->Phi[135]*f->P[9][8] + t->Phi[136]*f->P[10][8] + t->Phi[137]*f->P[11][8] +
-            t->Phi[138]*f->P[12][8] + t->Phi[139]*f->P[13][8] + t->Phi[140]*f->P[14][8] +
-            t->Phi[141]*f->P[15][8] + t->Phi[142]*f->P[16][8] + t->Phi[143]*f->P[17][8] +
-            t->Phi[144]*f->P[18][8] + t->Phi[145]*f->P[19][8] + t->Phi[146]*f->P[20][8];
-    w->M[9] = t->Phi[126]*f->P[0][9] + t->Phi[127]*f->P[1][9] + t->Phi[128]*f->P[2][9] +
-            t->Phi[129]*f->P[3][9] + t->Phi[130]*f->P[4][9] + t->Phi[131]*f->P[5][9] +
-            t->Phi[132]*f->P[6][9] + t->Phi[133]*f->P[7][9] + t->Phi[134]*f->P[8][9] +
-            t->Phi[135]*f->P[9][9] + t->Phi[136]*f->P[10][9] + t->Phi[137]*f->P[11][9] +
-            t->Phi[138]*f->P[12][9] + t->Phi[139]*f->P[13][9] + t->Phi[140]*f->P[14][9] +
-            t->Phi[141]*f->P[15][9] + t->Phi[142]*f->P[16][9] + t->Phi[143]*f->P[17][9] +
-            t->Phi[144]*f->P[18][9] + t->Phi[145]*f->P[19][9] + t->Phi[146]*f->P[20][9];
-    w->M[10] = t->Phi[126]*f->P[0][10] + t->Phi[127]*f->P[1][10] + t->Phi[128]*f->P[2][10] +
-            t->Phi[129]*f->P[3][10] + t->Phi[130]*f->P[4][10] + t->Phi[131]*f->P[5][10] +
-            t->Phi[132]*f->P[6][10] + t->Phi[133]*f->P[7][10] + t->Phi[134]*f->P[8][10] +
-            t->Phi[135]*f->P[9][10] + t->Phi[136]*f->P[10][10] + t->Phi[137]*f->P[11][10] +
-            t->Phi[138]*f->P[12][10] + t->Phi[139]*f->P[13][10] + t->Phi[140]*f->P[14][10] +
-            t->Phi[141]*f->P[15][10] + t->Phi[142]*f->P[16][10] + t->Phi[143]*f->P[17][10] +
-            t->Phi[144]*f->P[18][10] + t->Phi[145]*f->P[19][10] + t->Phi[146]*f->P[20][10];
-    w->M[11] = t->Phi[126]*f->P[0][11] + t->Phi[127]*f->P[1][11] + t->Phi[128]*f->P[2][11] +
-            t->Phi[129]*f->P[3][11] + t->Phi[130]*f->P[4][11] + t->Phi[131]*f->P[5][11] +
-            t->Phi[132]*f->P[6][11] + t->Phi[133]*f->P[7][11] + t->Phi[134]*f->P[8][11] +
-            t->Phi[135]*f->P[9][11] + t->Phi[136]*f->P[10][11] + t->Phi[137]*f->P[11][11] +
-            t->Phi[138]*f->P[12][11] + t->Phi[139]*f->P[13][11] + t->Phi[140]*f->P[14][11] +
-            t->Phi[141]*f->P[15][11] + t->Phi[142]*f->P[16][11] + t->Phi[143]*f->P[17][11] +
-            t->Phi[144]*f->P[18][11] + t->Phi[145]*f->P[19][11] + t->Phi[146]*f->P[20][11];
-    w->M[12] = t->Phi[126]*f->P[0][12] + t->Phi[127]*f->P[1][12] + t->Phi[128]*f->P[2][12] +
-            t->Phi[129]*f->P[3][12] + t->Phi[130]*f->P[4][12] + t->Phi[131]*f->P[5][12] +
-            t->Phi[132]*f->P[6][12] + t->Phi[133]*f->P[7][12] + t->Phi[134]*f->P[8][12] +
-            t->Phi[135]*f->P[9][12] + t->Phi[136]*f->P[10][12] + t->Phi[137]*f->P[11][12] +
-            t->Phi[138]*f->P[12][12] + t->Phi[139]*f->P[13][12] + t->Phi[140]*f->P[14][12] +
-            t->Phi[141]*f->P[15][12] + t->Phi[142]*f->P[16][12] + t->Phi[143]*f->P[17][12] +
-            t->Phi[144]*f->P[18][12] + t->Phi[145]*f->P[19][12] + t->Phi[146]*f->P[20][12];
-    w->M[13] = t->Phi[126]*f->P[0][13] + t->Phi[127]*f->P[1][13] + t->Phi[128]*f->P[2][13] +
-            t->Phi[129]*f->P[3][13] + t->Phi[130]*f->P[4][13] + t->Phi[131]*f->P[5][13] +
-            t->Phi[132]*f->P[6][13] + t->Phi[133]*f->P[7][13] + t->Phi[134]*f->P[8][13] +
-            t->Phi[135]*f->P[9][13] + t->Phi[136]*f->P[10][13] + t->Phi[137]*f->P[11][13] +
-            t->Phi[138]*f->P[12][13] + t->Phi[139]*f->P[13][13] + t->Phi[140]*f->P[14][13] +
-            t->Phi[141]*f->P[15][13] + t->Phi[142]*f->P[16][13] + t->Phi[143]*f->P[17][13] +
-            t->Phi[144]*f->P[18][13] + t->Phi[145]*f->P[19][13] + t->Phi[146]*f->P[20][13];
-    w->M[14] = t->Phi[126]*f->P[0][14] + t->Phi[127]*f->P[1][14] + t->Phi[128]*f->P[2][14] +
-            t->Phi[129]*f->P[3][14] + t->Phi[130]*f->P[4][14] + t->Phi[131]*f->P[5][14] +
-            t->Phi[132]*f->P[6][14] + t->Phi[133]*f->P[7][14] + t->Phi[134]*f->P[8][14] +
-            t->Phi[135]*f->P[9][14] + t->Phi[136]*f->P[10][14] + t->Phi[137]*f->P[11][14] +
-            t->Phi[138]*f->P[12][14] + t->Phi[139]*f->P[13][14] + t->Phi[140]*f->P[14][14] +
-            t->Phi[141]*f->P[15][14] + t->Phi[142]*f->P[16][14] + t->Phi[143]*f->P[17][14] +
-            t->Phi[144]*f->P[18][14] + t->Phi[145]*f->P[19][14] + t->Phi[146]*f->P[20][14];
-    w->M[15] = t->Phi[126]*f->P[0][15] + t->Phi[127]*f->P[1][15] + t->Phi[128]*f->P[2][15] +
-            t->Phi[129]*f->P[3][15] + t->Phi[130]*f->P[4][15] + t->Phi[131]*f->P[5][15] +
-            t->Phi[132]*f->P[6][15] + t->Phi[133]*f->P[7][15] + t->Phi[134]*f->P[8][15] +
-            t->Phi[135]*f->P[9][15] + t->Phi[136]*f->P[10][15] + t->Phi[137]*f->P[11][15] +
-            t->Phi[138]*f->P[12][15] + t->Phi[139]*f->P[13][15] + t->Phi[140]*f->P[14][15] +
-            t->Phi[141]*f->P[15][15] + t->Phi[142]*f->P[16][15] + t->Phi[143]*f->P[17][15] +
-            t->Phi[144]*f->P[18][15] + t->Phi[145]*f->P[19][15] + t->Phi[146]*f->P[20][15];
-    w->M[16] = t->Phi[126]*f->P[0][16] + t->Phi[127]*f->P[1][16] + t->Phi[128]*f->P[2][16] +
-            t->Phi[129]*f->P[3][16] + t->Phi[130]*f->P[4][16] + t->Phi[131]*f->P[5][16] +
-            t->Phi[132]*f->P[6][16] + t->Phi[133]*f->P[7][16] + t->Phi[134]*f->P[8][16] +
-            t->Phi[135]*f->P[9][16] + t->Phi[136]*f->P[10][16] + t->Phi[137]*f->P[11][16] +
-            t->Phi[138]*f->P[12][16] + t->Phi[139]*f->P[13][16] + t->Phi[140]*f->P[14][16] +
-            t->Phi[141]*f->P[15][16] + t->Phi[142]*f->P[16][16] + t->Phi[143]*f->P[17][16] +
-            t->Phi[144]*f->P[18][16] + t->Phi[145]*f->P[19][16] + t->Phi[146]*f->P[20][16];
-    w->M[17] = t->Phi[126]*f->P[0][17] + t->Phi[127]*f->P[1][17] + t->Phi[128]*f->P[2][17] +
-            t->Phi[129]*f->P[3][17] + t->Phi[130]*f->P[4][17] + t->Phi[131]*f->P[5][17] +
-            t->Phi[132]*f->P[6][17] + t->Phi[133]*f->P[7][17] + t->Phi[134]*f->P[8][17] +
-            t->Phi[135]*f->P[9][17] + t->Phi[136]*f->P[10][17] + t->Phi[137]*f->P[11][17] +
-            t->Phi[138]*f->P[12][17] + t->Phi[139]*f->P[13][17] + t->Phi[140]*f->P[14][17] +
-            t->Phi[141]*f->P[15][17] + t->Phi[142]*f->P[16][17] + t->Phi[143]*f->P[17][17] +
-            t->Phi[144]*f->P[18][17] + t->Phi[145]*f->P[19][17] + t->Phi[146]*f->P[20][17];
-    w->M[18] = t->Phi[126]*f->P[0][18] + t->Phi[127]*f->P[1][18] + t->Phi[128]*f->P[2][18] +
-            t->Phi[129]*f->P[3][18] + t->Phi[130]*f->P[4][18] + t->Phi[131]*f->P[5][18] +
-            t->Phi[132]*f->P[6][18] + t->Phi[133]*f->P[7][18] + t->Phi[134]*f->P[8][18] +
-            t->Phi[135]*f->P[9][18] + t->Phi[136]*f->P[10][18] + t->Phi[137]*f->P[11][18] +
-            t->Phi[138]*f->P[12][18] + t->Phi[139]*f->P[13][18] + t->Phi[140]*f->P[14][18] +
-            t->Phi[141]*f->P[15][18] + t->Phi[142]*f->P[16][18] + t->Phi[143]*f->P[17][18] +
-            t->Phi[144]*f->P[18][18] + t->Phi[145]*f->P[19][18] + t->Phi[146]*f->P[20][18];
-    w->M[19] = t->Phi[126]*f->P[0][19] + t->Phi[127]*f->P[1][19] + t->Phi[128]*f->P[2][19] +
-            t->Phi[129]*f->P[3][19] + t->Phi[130]*f->P[4][19] + t->Phi[131]*f->P[5][19] +
-            t->Phi[132]*f->P[6][19] + t->Phi[133]*f->P[7][19] + t->Phi[134]*f->P[8][19] +
-            t->Phi[135]*f->P[9][19] + t->Phi[136]*f->P[10][19] + t->Phi[137]*f->P[11][19] +
-            t->Phi[138]*f->P[12][19] + t->Phi[139]*f->P[13][19] + t->Phi[140]*f->P[14][19] +
-            t->Phi[141]*f->P[15][19] + t->Phi[142]*f->P[16][19] + t->Phi[143]*f->P[17][19] +
-            t->Phi[144]*f->P[18][19] + t->Phi[145]*f->P[19][19] + t->Phi[146]*f->P[20][19];
+    int c;
+    lane_pair b[21];
+    b[0] = lane_pair_of(t->Phi[126], t->Phi[126]);
+    b[1] = lane_pair_of(t->Phi[127], t->Phi[127]);
+    b[2] = lane_pair_of(t->Phi[128], t->Phi[128]);
+    b[3] = lane_pair_of(t->Phi[129], t->Phi[129]);
+    b[4] = lane_pair_of(t->Phi[130], t->Phi[130]);
+    b[5] = lane_pair_of(t->Phi[131], t->Phi[131]);
+    b[6] = lane_pair_of(t->Phi[132], t->Phi[132]);
+    b[7] = lane_pair_of(t->Phi[133], t->Phi[133]);
+    b[8] = lane_pair_of(t->Phi[134], t->Phi[134]);
+    b[9] = lane_pair_of(t->Phi[135], t->Phi[135]);
+    b[10] = lane_pair_of(t->Phi[136], t->Phi[136]);
+    b[11] = lane_pair_of(t->Phi[137], t->Phi[137]);
+    b[12] = lane_pair_of(t->Phi[138], t->Phi[138]);
+    b[13] = lane_pair_of(t->Phi[139], t->Phi[139]);
+    b[14] = lane_pair_of(t->Phi[140], t->Phi[140]);
+    b[15] = lane_pair_of(t->Phi[141], t->Phi[141]);
+    b[16] = lane_pair_of(t->Phi[142], t->Phi[142]);
+    b[17] = lane_pair_of(t->Phi[143], t->Phi[143]);
+    b[18] = lane_pair_of(t->Phi[144], t->Phi[144]);
+    b[19] = lane_pair_of(t->Phi[145], t->Phi[145]);
+    b[20] = lane_pair_of(t->Phi[146], t->Phi[146]);
+    for (c = 0; c + 1 < 21; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[16][c]));
+        acc = lane_pair_add_product(acc, b[17], lane_pair_load(&f->P[17][c]));
+        acc = lane_pair_add_product(acc, b[18], lane_pair_load(&f->P[18][c]));
+        acc = lane_pair_add_product(acc, b[19], lane_pair_load(&f->P[19][c]));
+        acc = lane_pair_add_product(acc, b[20], lane_pair_load(&f->P[20][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[20] = t->Phi[126]*f->P[0][20] + t->Phi[127]*f->P[1][20] + t->Phi[128]*f->P[2][20] +
             t->Phi[129]*f->P[3][20] + t->Phi[130]*f->P[4][20] + t->Phi[131]*f->P[5][20] +
             t->Phi[132]*f->P[6][20] + t->Phi[133]*f->P[7][20] + t->Phi[134]*f->P[8][20] +
@@ -5811,146 +5304,53 @@ INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_6(const ins_gnss21_transition *
 INS_GNSS21_BLOCK void phi_times_p_row_7(const ins_gnss21_filter *restrict f, const
         ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[147]*f->P[0][0] + t->Phi[148]*f->P[1][0] + t->Phi[149]*f->P[2][0] +
-            t->Phi[150]*f->P[3][0] + t->Phi[151]*f->P[4][0] + t->Phi[152]*f->P[5][0] +
-            t->Phi[153]*f->P[6][0] + t->Phi[154]*f->P[7][0] + t->Phi[155]*f->P[8][0] +
-            t->Phi[156]*f->P[9][0] + t->Phi[157]*f->P[10][0] + t->Phi[158]*f->P[11][0] +
-            t->Phi[159]*f->P[12][0] + t->Phi[160]*f->P[13][0] + t->Phi[161]*f->P[14][0] +
-            t->Phi[162]*f->P[15][0] + t->Phi[163]*f->P[16][0] + t->Phi[164]*f->P[17][0] +
-            t->Phi[165]*f->P[18][0] + t->Phi[166]*f->P[19][0] + t->Phi[167]*f->P[20][0];
-    w->M[1] = t->Phi[147]*f->P[0][1] + t->Phi[148]*f->P[1][1] + t->Phi[149]*f->P[2][1] +
-            t->Phi[150]*f->P[3][1] + t->Phi[151]*f->P[4][1] + t->Phi[152]*f->P[5][1] +
-            t->Phi[153]*f->P[6][1] + t->Phi[154]*f->P[7][1] + t->Phi[155]*f->P[8][1] +
-            t->Phi[156]*f->P[9][1] + t->Phi[157]*f->P[10][1] + t->Phi[158]*f->P[11][1] +
-            t->Phi[159]*f->P[12][1] + t->Phi[160]*f->P[13][1] + t->Phi[161]*f->P[14][1] +
-            t->Phi[162]*f->P[15][1] + t->Phi[163]*f->P[16][1] + t->Phi[164]*f->P[17][1] +
-            t->Phi[165]*f->P[18][1] + t->Phi[166]*f->P[19][1] + t->Phi[167]*f->P[20][1];
-    w->M[2] = t->Phi[147]*f->P[0][2] + t->Phi[148]*f->P[1][2] + t->Phi[149]*f->P[2][2] +
-            t->Phi[150]*f->P[3][2] + t->Phi[151]*f->P[4][2] + t->Phi[152]*f->P[5][2] +
-            t->Phi[153]*f->P[6][2] + t->Phi[154]*f->P[7][2] + t->Phi[155]*f->P[8][2] +
-            t->Phi[156]*f->P[9][2] + t->Phi[157]*f->P[10][2] + t->Phi[158]*f->P[11][2] +
-            t->Phi[159]*f->P[12][2] + t->Phi[160]*f->P[13][2] + t->Phi[161]*f->P[14][2] +
-            t->Phi[162]*f->P[15][2] + t->Phi[163]*f->P[16][2] + t->Phi[164]*f->P[17][2] +
-            t->Phi[165]*f->P[18][2] + t->Phi[166]*f->P[19][2] + t->Phi[167]*f->P[20][2];
-    w->M[3] = t->Phi[147]*f->P[0][3] + t->Phi[148]*f->P[1][3] + t->Phi[149]*f->P[2][3] +
-            t->Phi[150]*f->P[3][3] + t->Phi[151]*f->P[4][3] + t->Phi[152]*f->P[5][3] +
-            t->Phi[153]*f->P[6][3] + t->Phi[154]*f->P[7][3] + t->Phi[155]*f->P[8][3] +
-            t->Phi[156]*f->P[9][3] + t->Phi[157]*f->P[10][3] + t->Phi[158]*f->P[11][3] +
-            t->Phi[159]*f->P[12][3] + t->Phi[160]*f->P[13][3] + t->Phi[161]*f->P[14][3] +
-            t->Phi[162]*f->P[15][3] + t->Phi[163]*f->P[16][3] + t->Phi[164]*f->P[17][3] +
-            t->Phi[165]*f->P[18][3] + t->Phi[166]*f->P[19][3] + t->Phi[167]*f->P[20][3];
-    w->M[4] = t->Phi[147]*f->P[0][4] + t->Phi[148]*f->P[1][4] + t->Phi[149]*f->P[2][4] +
-            t->Phi[150]*f->P[3][4] + t->Phi[151]*f->P[4][4] + t->Phi[152]*f->P[5][4] +
-            t->Phi[153]*f->P[6][4] + t->Phi[154]*f->P[7][4] + t->Phi[155]*f->P[8][4] +
-            t->Phi[156]*f->P[9][4] + t->Phi[157]*f->P[10][4] + t->Phi[158]*f->P[11][4] +
-            t->Phi[159]*f->P[12][4] + t->Phi[160]*f->P[13][4] + t->Phi[161]*f->P[14][4] +
-            t->Phi[162]*f->P[15][4] + t->Phi[163]*f->P[16][4] + t->Phi[164]*f->P[17][4] +
-            t->Phi[165]*f->P[18][4] + t->Phi[166]*f->P[19][4] + t->Phi[167]*f->P[20][4];
-    w->M[5] = t->Phi[147]*f->P[0][5] + t->Phi[148]*f->P[1][5] + t->Phi[149]*f->P[2][5] +
-            t->Phi[150]*f->P[3][5] + t->Phi[151]*f->P[4][5] + t->Phi[152]*f->P[5][5] +
-            t->Phi[153]*f->P[6][5] + t->Phi[154]*f->P[7][5] + t->Phi[155]*f->P[8][5] +
-            t->Phi[156]*f->P[9][5] + t->Phi[157]*f->P[10][5] + t->Phi[158]*f->P[11][5] +
-            t->Phi[159]*f->P[12][5] + t->Phi[160]*f->P[13][5] + t->Phi[161]*f->P[14][5] +
-            t->Phi[162]*f->P[15][5] + t->Phi[163]*f->P[16][5] + t->Phi[164]*f->P[17][5] +
-            t->Phi[165]*f->P[18][5] + t->Phi[166]*f->P[19][5] + t->Phi[167]*f->P[20][5];
-    w->M[6] = t->Phi[147]*f->P[0][6] + t->Phi[148]*f->P[1][6] + t->Phi[149]*f->P[2][6] +
-            t->Phi[150]*f->P[3][6] + t->Phi[151]*f->P[4][6] + t->Phi[152]*f->P[5][6] +
-            t->Phi[153]*f->P[6][6] + t->Phi[154]*f->P[7][6] + t->Phi[155]*f->P[8][6] +
-            t->Phi[156]*f->P[9][6] + t->Phi[157]*f->P[10][6] + t->Phi[158]*f->P[11][6] +
-            t->Phi[159]*f->P[12][6] + t->Phi[160]*f->P[13][6] + t->Phi[161]*f->P[14][6] +
-            t->Phi[162]*f->P[15][6] + t->Phi[163]*f->P[16][6] + t->Phi[164]*f->P[17][6] +
-            t->Phi[165]*f->P[18][6] + t->Phi[166]*f->P[19][6] + t->Phi[167]*f->P[20][6];
-    w->M[7] = t->Phi[147]*f->P[0][7] + t->Phi[148]*f->P[1][7] + t->Phi[149]*f->P[2][7] +
-            t->Phi[150]*f->P[3][7] + t->Phi[151]*f->P[4][7] + t->Phi[152]*f->P[5][7] +
-            t->Phi[153]*f->P[6][7] + t->Phi[154]*f->P[7][7] + t->Phi[155]*f->P[8][7] +
-            t->Phi[156]*f->P[9][7] + t->Phi[157]*f->P[10][7] + t->Phi[158]*f->P[11][7] +
-            t->Phi[159]*f->P[12][7] + t->Phi[160]*f->P[13][7] + t->Phi[161]*f->P[14][7] +
-            t->Phi[162]*f->P[15][7] + t->Phi[163]*f->P[16][7] + t->Phi[164]*f->P[17][7] +
-            t->Phi[165]*f->P[18][7] + t->Phi[166]*f->P[19][7] + t->Phi[167]*f->P[20][7];
-    w->M[8] = t->Phi[147]*f->P[0][8] + t->Phi[148]*f->P[1][8] + t->Phi[149]*f->P[2][8] +
-            t->Phi[150]*f->P[3][8] + t->Phi[151]*f->P[4][8] + t->Phi[152]*f->P[5][8] +
-            t->Phi[153]*f->P[6][8] + t->Phi[154]*f->P[7][8] + t->Phi[155]*f->P[8][8] +
-            t->Phi[156]*f->P[9][8] + t->Phi[157]*f->P[10][8] + t->Phi[158]*f->P[11][8] +
-            t->Phi[159]*f->P[12][8] + t->Phi[160]*f->P[13][8] + t->Phi[161]*f->P[14][8] +
-            t->Phi[162]*f->P[15][8] + t->Phi[163]*f->P[16][8] + t->Phi[164]*f->P[17][8] +
-            t->Phi[165]*f->P[18][8] + t->Phi[166]*f->P[19][8] + t->Phi[167]*f->P[20][8];
-    w->M[9] = t->Phi[147]*f->P[0][9] + t->Phi[148]*f->P[1][9] + t->Phi[149]*f->P[2][9] +
-            t->Phi[150]*f->P[3][9] + t->Phi[151]*f->P[4][9] + t->Phi[152]*f->P[5][9] +
-            t->Phi[153]*f->P[6][9] + t->Phi[154]*f->P[7][9] + t->Phi[155]*f->P[8][9] +
-            t->Phi[156]*f->P[9][9] + t->Phi[157]*f->P[10][9] + t->Phi[158]*f->P[11][9] +
-            t->Phi[159]*f->P[12][9] + t->Phi[160]*f->P[13][9] + t->Phi[161]*f->P[14][9] +
-            t->Phi[162]*f->P[15][9] + t->Phi[163]*f->P[16][9] + t->Phi[164]*f->P[17][9] +
-            t->Phi[165]*f->P[18][9] + t->Phi[166]*f->P[19][9] + t->Phi[167]*f->P[20][9];
-    w->M[10] = t->Phi[147]*f->P[0][10] + t->Phi[148]*f->P[1][10] + t->Phi[149]*f->P[2][10] +
-            t->Phi[150]*f->P[3][10] + t->Phi[151]*f->P[4][10] + t->Phi[152]*f->P[5][10] +
-            t->Phi[153]*f->P[6][10] + t->Phi[154]*f->P[7][10] + t->Phi[155]*f->P[8][10] +
-            t->Phi[156]*f->P[9][10] + t->Phi[157]*f->P[10][10] + t->Phi[158]*f->P[11][10] +
-            t->Phi[159]*f->P[12][10] + t->Phi[160]*f->P[13][10] + t->Phi[161]*f->P[14][10] +
-            t->Phi[162]*f->P[15][10] + t->Phi[163]*f->P[16][10] + t->Phi[164]*f->P[17][10] +
-            t->Phi[165]*f->P[18][10] + t->Phi[166]*f->P[19][10] + t->Phi[167]*f->P[20][10];
-    w->M[11] = t->Phi[147]*f->P[0][11] + t->Phi[148]*f->P[1][11] + t->Phi[149]*f->P[2][11] +
-            t->Phi[150]*f->P[3][11] + t->Phi[151]*f->P[4][11] + t->Phi[152]*f->P[5][11] +
-            t->Phi[153]*f->P[6][11] + t->Phi[154]*f->P[7][11] + t->Phi[155]*f->P[8][11] +
-            t->Phi[156]*f->P[9][11] + t->Phi[157]*f->P[10][11] + t->Phi[158]*f->P[11][11] +
-            t->Phi[159]*f->P[12][11] + t->Phi[160]*f->P[13][11] + t->Phi[161]*f->P[14][11] +
-            t->Phi[162]*f->P[15][11] + t->Phi[163]*f->P[16][11] + t->Phi[164]*f->P[17][11] +
-            t->Phi[165]*f->P[18][11] + t->Phi[166]*f->P[19][11] + t->Phi[167]*f->P[20][11];
-    w->M[12] = t->Phi[147]*f->P[0][12] + t->Phi[148]*f->P[1][12] + t->Phi[149]*f->P[2][12] +
-            t->Phi[150]*f->P[3][12] + t->Phi[151]*f->P[4][12] + t->Phi[152]*f->P[5][12] +
-            t->Phi[153]*f->P[6][12] + t->Phi[154]*f->P[7][12] + t->Phi[155]*f->P[8][12] +
-            t->Phi[156]*f->P[9][12] + t->Phi[157]*f->P[10][12] + t->Phi[158]*f->P[11][12] +
-            t->Phi[159]*f->P[12][12] + t->Phi[160]*f->P[13][12] + t->Phi[161]*f->P[14][12] +
-            t->Phi[162]*f->P[15][12] + t->Phi[163]*f->P[16][12] + t->Phi[164]*f->P[17][12] +
-            t->Phi[165]*f->P[18][12] + t->Phi[166]*f->P[19][12] + t->Phi[167]*f->P[20][12];
-    w->M[13] = t->Phi[147]*f->P[0][13] + t->Phi[148]*f->P[1][13] + t->Phi[149]*f->P[2][13] +
-            t->Phi[150]*f->P[3][13] + t->Phi[151]*f->P[4][13] + t->Phi[152]*f->P[5][13] +
-            t->Phi[153]*f->P[6][13] + t->Phi[154]*f->P[7][13] + t->Phi[155]*f->P[8][13] +
-            t->Phi[156]*f->P[9][13] + t->Phi[157]*f->P[10][13] + t->Phi[158]*f->P[11][13] +
-            t->Phi[159]*f->P[12][13] + t->Phi[160]*f->P[13][13] + t->Phi[161]*f->P[14][13] +
-            t->Phi[162]*f->P[15][13] + t->Phi[163]*f->P[16][13] + t->Phi[164]*f->P[17][13] +
-            t->Phi[165]*f->P[18][13] + t->Phi[166]*f->P[19][13] + t->Phi[167]*f->P[20][13];
-    w->M[14] = t->Phi[147]*f->P[0][14] + t->Phi[148]*f->P[1][14] + t->Phi[149]*f->P[2][14] +
-            t->Phi[150]*f->P[3][14] + t->Phi[151]*f->P[4][14] + t->Phi[152]*f->P[5][14] +
-            t->Phi[153]*f->P[6][14] + t->Phi[154]*f->P[7][14] + t->Phi[155]*f->P[8][14] +
-            t->Phi[156]*f->P[9][14] + t->Phi[157]*f->P[10][14] + t->Phi[158]*f->P[11][14] +
-            t->Phi[159]*f->P[12][14] + t->Phi[160]*f->P[13][14] + t->Phi[161]*f->P[14][14] +
-            t->Phi[162]*f->P[15][14] + t->Phi[163]*f->P[16][14] + t->Phi[164]*f->P[17][14] +
-            t->Phi[165]*f->P[18][14] + t->Phi[166]*f->P[19][14] + t->Phi[167]*f->P[20][14];
-    w->M[15] = t->Phi[147]*f->P[0][15] + t->Phi[148]*f->P[1][15] + t->Phi[149]*f->P[2][15] +
-            t->Phi[150]*f->P[3][15] + t->Phi[151]*f->P[4][15] + t->Phi[152]*f->P[5][15] +
-            t->Phi[153]*f->P[6][15] + t->Phi[154]*f->P[7][15] + t->Phi[155]*f->P[8][15] +
-            t->Phi[156]*f->P[9][15] + t->Phi[157]*f->P[10][15] + t->Phi[158]*f->P[11][15] +
-            t->Phi[159]*f->P[12][15] + t->Phi[160]*f->P[13][15] + t->Phi[161]*f->P[14][15] +
-            t->Phi[162]*f->P[15][15] + t->Phi[163]*f->P[16][15] + t->Phi[164]*f->P[17][15] +
-            t->Phi[165]*f->P[18][15] + t->Phi[166]*f->P[19][15] + t->Phi[167]*f->P[20][15];
-    w->M[16] = t->Phi[147]*f->P[0][16] + t->Phi[148]*f->P[1][16] + t->Phi[149]*f->P[2][16] +
-            t->Phi[150]*f->P[3][16] + t->Phi[151]*f->P[4][16] + t->Phi[152]*f->P[5][16] +
-            t->Phi[153]*f->P[6][16] + t->Phi[154]*f->P[7][16] + t->Phi[155]*f->P[8][16] +
-            t->Phi[156]*f->P[9][16] + t->Phi[157]*f->P[10][16] + t->Phi[158]*f->P[11][16] +
-            t->Phi[159]*f->P[12][16] + t->Phi[160]*f->P[13][16] + t->Phi[161]*f->P[14][16] +
-            t->Phi[162]*f->P[15][16] + t->Phi[163]*f->P[16][16] + t->Phi[164]*f->P[17][16] +
-            t->Phi[165]*f->P[18][16] + t->Phi[166]*f->P[19][16] + t->Phi[167]*f->P[20][16];
-    w->M[17] = t->Phi[147]*f->P[0][17] + t->Phi[148]*f->P[1][17] + t->Phi[149]*f->P[2][17] +
-            t->Phi[150]*f->P[3][17] + t->Phi[151]*f->P[4][17] + t->Phi[152]*f->P[5][17] +
-            t->Phi[153]*f->P[6][17] + t->Phi[154]*f->P[7][17] + t->Phi[155]*f->P[8][17] +
-            t->Phi[156]*f->P[9][17] + t->Phi[157]*f->P[10][17] + t->Phi[158]*f->P[11][17] +
-            t->Phi[159]*f->P[12][17] + t->Phi[160]*f->P[13][17] + t->Phi[161]*f->P[14][17] +
-            t->Phi[162]*f->P[15][17] + t->Phi[163]*f->P[16][17] + t->Phi[164]*f->P[17][17] +
-            t->Phi[165]*f->P[18][17] + t->Phi[166]*f->P[19][17] + t->Phi[167]*f->P[20][17];
-    w->M[18] = t->Phi[147]*f->P[0][18] + t->Phi[148]*f->P[1][18] + t->Phi[149]*f->P[2][18] +
-            t->Phi[150]*f->P[3][18] + t->Phi[151]*f->P[4][18] + t->Phi[152]*f->P[5][18] +
-            t->Phi[153]*f->P[6][18] + t->Phi[154]*f->P[7][18] + t->Phi[155]*f->P[8][18] +
-            t->Phi[156]*f->P[9][18] + t->Phi[157]*f->P[10][18] + t->Phi[158]*f->P[11][18] +
-            t->Phi[159]*f->P[12][18] + t->Phi[160]*f->P[13][18] + t->Phi[161]*f->P[14][18] +
-            t->Phi[162]*f->P[15][18] + t->Phi[163]*f->P[16][18] + t->Phi[164]*f->P[17][18] +
-            t->Phi[165]*f->P[18][18] + t->Phi[166]*f->P[19][18] + t->Phi[167]*f->P[20][18];
-    w->M[19] = t->Phi[147]*f->P[0][19] + t->Phi[148]*f->P[1][19] + t->Phi[149]*f->P[2][19] +
-            t->Phi[150]*f->P[3][19] + t->Phi[151]*f->P[4][19] + t->Phi[152]*f->P[5][19] +
-            t->Phi[153]*f->P[6][19] + t->Phi[154]*f->P[7][19] + t->Phi[155]*f->P[8][19] +
-            t->Phi[156]*f->P[9][19] + t->Phi[157]*f->P[10][19] + t->Phi[158]*f->P[11][19] +
-            t->Phi[159]*f->P[12][19] + t->Phi[160]*f->P[13][19] + t->Phi[161]*f->P[14][19] +
-            t->Phi[162]*f->P[15][19] + t->Phi[163]*f->P[16][19] + t->Phi[164]*f->P[17][19] +
-            t->Phi[165]*f->P[18][19] + t->Phi[166]*f->P[19][19] + t->Phi[167]*f->P[20][19];
+    int c;
+    lane_pair b[21];
+    b[0] = lane_pair_of(t->Phi[147], t->Phi[147]);
+    b[1] = lane_pair_of(t->Phi[148], t->Phi[148]);
+    b[2] = lane_pair_of(t->Phi[149], t->Phi[149]);
+    b[3] = lane_pair_of(t->Phi[150], t->Phi[150]);
+    b[4] = lane_pair_of(t->Phi[151], t->Phi[151]);
+    b[5] = lane_pair_of(t->Phi[152], t->Phi[152]);
+    b[6] = lane_pair_of(t->Phi[153], t->Phi[153]);
+    b[7] = lane_pair_of(t->Phi[154], t->Phi[154]);
+    b[8] = lane_pair_of(t->Phi[155], t->Phi[155]);
+    b[9] = lane_pair_of(t->Phi[156], t->Phi[156]);
+    b[10] = lane_pair_of(t->Phi[157], t->Phi[157]);
+    b[11] = lane_pair_of(t->Phi[158], t->Phi[158]);
+    b[12] = lane_pair_of(t->Phi[159], t->Phi[159]);
+    b[13] = lane_pair_of(t->Phi[160], t->Phi[160]);
+    b[14] = lane_pair_of(t->Phi[161], t->Phi[161]);
+    b[15] = lane_pair_of(t->Phi[162], t->Phi[162]);
+    b[16] = lane_pair_of(t->Phi[163], t->Phi[163]);
+    b[17] = lane_pair_of(t->Phi[164], t->Phi[164]);
+    b[18] = lane_pair_of(t->Phi[165], t->Phi[165]);
+    b[19] = lane_pair_of(t->Phi[166], t->Phi[166]);
+    b[20] = lane_pair_of(t->Phi[167], t->Phi[167]);
+    for (c = 0; c + 1 < 21; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[16][c]));
+        acc = lane_pair_add_product(acc, b[17], lane_pair_load(&f->P[17][c]));
+        acc = lane_pair_add_product(acc, b[18], lane_pair_load(&f->P[18][c]));
+        acc = lane_pair_add_product(acc, b[19], lane_pair_load(&f->P[19][c]));
+        acc = lane_pair_add_product(acc, b[20], lane_pair_load(&f->P[20][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[20] = t->Phi[147]*f->P[0][20] + t->Phi[148]*f->P[1][20] + t->Phi[149]*f->P[2][20] +
             t->Phi[150]*f->P[3][20] + t->Phi[151]*f->P[4][20] + t->Phi[152]*f->P[5][20] +
             t->Phi[153]*f->P[6][20] + t->Phi[154]*f->P[7][20] + t->Phi[155]*f->P[8][20] +
@@ -6007,146 +5407,53 @@ INS_GNSS21_BLOCK ins_gnss21_scalar propagate_row_7(const ins_gnss21_transition *
 INS_GNSS21_BLOCK void phi_times_p_row_8(const ins_gnss21_filter *restrict f, const
         ins_gnss21_transition *restrict t, ins_gnss21_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[168]*f->P[0][0] + t->Phi[169]*f->P[1][0] + t->Phi[170]*f->P[2][0] +
-            t->Phi[171]*f->P[3][0] + t->Phi[172]*f->P[4][0] + t->Phi[173]*f->P[5][0] +
-            t->Phi[174]*f->P[6][0] + t->Phi[175]*f->P[7][0] + t->Phi[176]*f->P[8][0] +
-            t->Phi[177]*f->P[9][0] + t->Phi[178]*f->P[10][0] + t->Phi[179]*f->P[11][0] +
-            t->Phi[180]*f->P[12][0] + t->Phi[181]*f->P[13][0] + t->Phi[182]*f->P[14][0] +
-            t->Phi[183]*f->P[15][0] + t->Phi[184]*f->P[16][0] + t->Phi[185]*f->P[17][0] +
-            t->Phi[186]*f->P[18][0] + t->Phi[187]*f->P[19][0] + t->Phi[188]*f->P[20][0];
-    w->M[1] = t->Phi[168]*f->P[0][1] + t->Phi[169]*f->P[1][1] + t->Phi[170]*f->P[2][1] +
-            t->Phi[171]*f->P[3][1] + t->Phi[172]*f->P[4][1] + t->Phi[173]*f->P[5][1] +
-            t->Phi[174]*f->P[6][1] + t->Phi[175]*f->P[7][1] + t->Phi[176]*f->P[8][1] +
-            t->Phi[177]*f->P[9][1] + t->Phi[178]*f->P[10][1] + t->Phi[179]*f->P[11][1] +
-            t->Phi[180]*f->P[12][1] + t->Phi[181]*f->P[13][1] + t->Phi[182]*f->P[14][1] +
-            t->Phi[183]*f->P[15][1] + t->Phi[184]*f->P[16][1] + t->Phi[185]*f->P[17][1] +
-            t->Phi[186]*f->P[18][1] + t->Phi[187]*f->P[19][1] + t->Phi[188]*f->P[20][1];
-    w->M[2] = t->Phi[168]*f->P[0][2] + t->Phi[169]*f->P[1][2] + t->Phi[170]*f->P[2][2] +
-            t->Phi[171]*f->P[3][2] + t->Phi[172]*f->P[4][2] + t->Phi[173]*f->P[5][2] +
-            t->Phi[174]*f->P[6][2] + t->Phi[175]*f->P[7][2] + t->Phi[176]*f->P[8][2] +
-            t->Phi[177]*f->P[9][2] + t->Phi[178]*f->P[10][2] + t->Phi[179]*f->P[11][2] +
-            t->Phi[180]*f->P[12][2] + t->Phi[181]*f->P[13][2] + t->Phi[182]*f->P[14][2] +
-            t->Phi[183]*f->P[15][2] + t->Phi[184]*f->P[16][2] + t->Phi[185]*f->P[17][2] +
-            t->Phi[186]*f->P[18][2] + t->Phi[187]*f->P[19][2] + t->Phi[188]*f->P[20][2];
-    w->M[3] = t->Phi[168]*f->P[0][3] + t->Phi[169]*f->P[1][3] + t->Phi[170]*f->P[2][3] +
-            t->Phi[171]*f->P[3][3] + t->Phi[172]*f->P[4][3] + t->Phi[173]*f->P[5][3] +
-            t->Phi[174]*f->P[6][3] + t->Phi[175]*f->P[7][3] + t->Phi[176]*f->P[8][3] +
-            t->Phi[177]*f->P[9][3] + t->Phi[178]*f->P[10][3] + t->Phi[179]*f->P[11][3] +
-            t->Phi[180]*f->P[12][3] + t->Phi[181]*f->P[13][3] + t->Phi[182]*f->P[14][3] +
-            t->Phi[183]*f->P[15][3] + t->Phi[184]*f->P[16][3] + t->Phi[185]*f->P[17][3] +
-            t->Phi[186]*f->P[18][3] + t->Phi[187]*f->P[19][3] + t->Phi[188]*f->P[20][3];
-    w->M[4] = t->Phi[168]*f->P[0][4] + t->Phi[169]*f->P[1][4] + t->Phi[170]*f->P[2][4] +
-            t->Phi[171]*f->P[3][4] + t->Phi[172]*f->P[4][4] + t->Phi[173]*f->P[5][4] +
-            t->Phi[174]*f->P[6][4] + t->Phi[175]*f->P[7][4] + t->Phi[176]*f->P[8][4] +
-            t->Phi[177]*f->P[9][4] + t->Phi[178]*f->P[10][4] + t->Phi[179]*f->P[11][4] +
-            t->Phi[180]*f->P[12][4] + t->Phi[181]*f->P[13][4] + t->Phi[182]*f->P[14][4] +
-            t->Phi[183]*f->P[15][4] + t->Phi[184]*f->P[16][4] + t->Phi[185]*f->P[17][4] +
-            t->Phi[186]*f->P[18][4] + t->Phi[187]*f->P[19][4] + t->Phi[188]*f->P[20][4];
-    w->M[5] = t->Phi[168]*f->P[0][5] + t->Phi[169]*f->P[1][5] + t->Phi[170]*f->P[2][5] +
-            t->Phi[171]*f->P[3][5] + t->Phi[172]*f->P[4][5] + t->Phi[173]*f->P[5][5] +
-            t->Phi[174]*f->P[6][5] + t->Phi[175]*f->P[7][5] + t->Phi[176]*f->P[8][5] +
-            t->Phi[177]*f->P[9][5] + t->Phi[178]*f->P[10][5] + t->Phi[179]*f->P[11][5] +
-            t->Phi[180]*f->P[12][5] + t->Phi[181]*f->P[13][5] + t->Phi[182]*f->P[14][5] +
-            t->Phi[183]*f->P[15][5] + t->Phi[184]*f->P[16][5] + t->Phi[185]*f->P[17][5] +
-            t->Phi[186]*f->P[18][5] + t->Phi[187]*f->P[19][5] + t->Phi[188]*f->P[20][5];
-    w->M[6] = t->Phi[168]*f->P[0][6] + t->Phi[169]*f->P[1][6] + t->Phi[170]*f->P[2][6] +
-            t->Phi[171]*f->P[3][6] + t->Phi[172]*f->P[4][6] + t->Phi[173]*f->P[5][6] +
-            t->Phi[174]*f->P[6][6] + t->Phi[175]*f->P[7][6] + t->Phi[176]*f->P[8][6] +
-            t->Phi[177]*f->P[9][6] + t->Phi[178]*f->P[10][6] + t->Phi[179]*f->P[11][6] +
-            t->Phi[180]*f->P[12][6] + t->Phi[181]*f->P[13][6] + t->Phi[182]*f->P[14][6] +
-            t->Phi[183]*f->P[15][6] + t->Phi[184]*f->P[16][6] + t->Phi[185]*f->P[17][6] +
-            t->Phi[186]*f->P[18][6] + t->Phi[187]*f->P[19][6] + t->Phi[188]*f->P[20][6];
-    w->M[7] = t->Phi[168]*f->P[0][7] + t->Phi[169]*f->P[1][7] + t->Phi[170]*f->P[2][7] +
-            t->Phi[171]*f->P[3][7] + t->Phi[172]*f->P[4][7] + t->Phi[173]*f->P[5][7] +
-            t->Phi[174]*f->P[6][7] + t->Phi[175]*f->P[7][7] + t->Phi[176]*f->P[8][7] +
-            t->Phi[177]*f->P[9][7] + t->Phi[178]*f->P[10][7] + t->Phi[179]*f->P[11][7] +
-            t->Phi[180]*f->P[12][7] + t->Phi[181]*f->P[13][7] + t->Phi[182]*f->P[14][7] +
-            t->Phi[183]*f->P[15][7] + t->Phi[184]*f->P[16][7] + t->Phi[185]*f->P[17][7] +
-            t->Phi[186]*f->P[18][7] + t->Phi[187]*f->P[19][7] + t->Phi[188]*f->P[20][7];
-    w->M[8] = t->Phi[168]*f->P[0][8] + t->Phi[169]*f->P[1][8] + t->Phi[170]*f->P[2][8] +
-            t->Phi[171]*f->P[3][8] + t->Phi[172]*f->P[4][8] + t->Phi[173]*f->P[5][8] +
-            t->Phi[174]*f->P[6][8] + t->Phi[175]*f->P[7][8] + t->Phi[176]*f->P[8][8] +
-            t->Phi[177]*f->P[9][8] + t->Phi[178]*f->P[10][8] + t->Phi[179]*f->P[11][8] +
-            t->Phi[180]*f->P[12][8] + t->Phi[181]*f->P[13][8] + t->Phi[182]*f->P[14][8] +
-            t->Phi[183]*f->P[15][8] + t->Phi[184]*f->P[16][8] + t->Phi[185]*f->P[17][8] +
-            t->Phi[186]*f->P[18][8] + t->Phi[187]*f->P[19][8] + t->Phi[188]*f->P[20][8];
-    w->M[9] = t->Phi[168]*f->P[0][9] + t->Phi[169]*f->P[1][9] + t->Phi[170]*f->P[2][9] +
-            t->Phi[171]*f->P[3][9] + t->Phi[172]*f->P[4][9] + t->Phi[173]*f->P[5][9] +
-            t->Phi[174]*f->P[6][9] + t->Phi[175]*f->P[7][9] + t->Phi[176]*f->P[8][9] +
-            t->Phi[177]*f->P[9][9] + t->Phi[178]*f->P[10][9] + t->Phi[179]*f->P[11][9] +
-            t->Phi[180]*f->P[12][9] + t->Phi[181]*f->P[13][9] + t->Phi[182]*f->P[14][9] +
-            t->Phi[183]*f->P[15][9] + t->Phi[184]*f->P[16][9] + t->Phi[185]*f->P[17][9] +
-            t->Phi[186]*f->P[18][9] + t->Phi[187]*f->P[19][9] + t->Phi[188]*f->P[20][9];
-    w->M[10] = t->Phi[168]*f->P[0][10] + t->Phi[169]*f->P[1][10] + t->Phi[170]*f->P[2][10] +
-            t->Phi[171]*f->P[3][10] + t->Phi[172]*f->P[4][10] + t->Phi[173]*f->P[5][10] +
-            t->Phi[174]*f->P[6][10] + t->Phi[175]*f->P[7][10] + t->Phi[176]*f->P[8][10] +
-            t->Phi[177]*f->P[9][10] + t->Phi[178]*f->P[10][10] + t->Phi[179]*f->P[11][10] +
-            t->Phi[180]*f->P[12][10] + t->Phi[181]*f->P[13][10] + t->Phi[182]*f->P[14][10] +
-            t->Phi[183]*f->P[15][10] + t->Phi[184]*f->P[16][10] + t->Phi[185]*f->P[17][10] +
-            t->Phi[186]*f->P[18][10] + t->Phi[187]*f->P[19][10] + t->Phi[188]*f->P[20][10];
-    w->M[11] = t->Phi[168]*f->P[0][11] + t->Phi[169]*f->P[1][11] + t->Phi[170]*f->P[2][11] +
-            t->Phi[171]*f->P[3][11] + t->Phi[172]*f->P[4][11] + t->Phi[173]*f->P[5][11] +
-            t->Phi[174]*f->P[6][11] + t->Phi[175]*f->P[7][11] + t->Phi[176]*f->P[8][11] +
-            t->Phi[177]*f->P[9][11] + t->Phi[178]*f->P[10][11] + t->Phi[179]*f->P[11][11] +
-            t->Phi[180]*f->P[12][11] + t->Phi[181]*f->P[13][11] + t->Phi[182]*f->P[14][11] +
-            t->Phi[183]*f->P[15][11] + t->Phi[184]*f->P[16][11] + t->Phi[185]*f->P[17][11] +
-            t->Phi[186]*f->P[18][11] + t->Phi[187]*f->P[19][11] + t->Phi[188]*f->P[20][11];
-    w->M[12] = t->Phi[168]*f->P[0][12] + t->Phi[169]*f->P[1][12] + t->Phi[170]*f->P[2][12] +
-            t->Phi[171]*f->P[3][12] + t->Phi[172]*f->P[4][12] + t->Phi[173]*f->P[5][12] +
-            t->Phi[174]*f->P[6][12] + t->Phi[175]*f->P[7][12] + t->Phi[176]*f->P[8][12] +
-            t->Phi[177]*f->P[9][12] + t->Phi[178]*f->P[10][12] + t->Phi[179]*f->P[11][12] +
-            t->Phi[180]*f->P[12][12] + t->Phi[181]*f->P[13][12] + t->Phi[182]*f->P[14][12] +
-            t->Phi[183]*f->P[15][12] + t->Phi[184]*f->P[16][12] + t->Phi[185]*f->P[17][12] +
-            t->Phi[186]*f->P[18][12] + t->Phi[187]*f->P[19][12] + t->Phi[188]*f->P[20][12];
-    w->M[13] = t->Phi[168]*f->P[0][13] + t->Phi[169]*f->P[1][13] + t->Phi[170]*f->P[2][13] +
-            t->Phi[171]*f->P[3][13] + t->Phi[172]*f->P[4][13] + t->Phi[173]*f->P[5][13] +
-            t->Phi[174]*f->P[6][13] + t->Phi[175]*f->P[7][13] + t->Phi[176]*f->P[8][13] +
-            t->Phi[177]*f->P[9][13] + t->Phi[178]*f->P[10][13] + t->Phi[179]*f->P[11][13] +
-            t->Phi[180]*f->P[12][13] + t->Phi[181]*f->P[13][13] + t->Phi[182]*f->P[14][13] +
-            t->Phi[183]*f->P[15][13] + t->Phi[184]*f->P[16][13] + t->Phi[185]*f->P[17][13] +
-            t->Phi[186]*f->P[18][13] + t->Phi[187]*f->P[19][13] + t->Phi[188]*f->P[20][13];
-    w->M[14] = t->Phi[168]*f->P[0][14] + t->Phi[169]*f->P[1][14] + t->Phi[170]*f->P[2][14] +
-            t->Phi[171]*f->P[3][14] + t->Phi[172]*f->P[4][14] + t->Phi[173]*f->P[5][14] +
-            t->Phi[174]*f->P[6][14] + t->Phi[175]*f->P[7][14] + t->Phi[176]*f->P[8][14] +
-            t->Phi[177]*f->P[9][14] + t->Phi[178]*f->P[10][14] + t->Phi[179]*f->P[11][14] +
-            t->Phi[180]*f->P[12][14] + t->Phi[181]*f->P[13][14] + t->Phi[182]*f->P[14][14] +
-            t->Phi[183]*f->P[15][14] + t->Phi[184]*f->P[16][14] + t->Phi[185]*f->P[17][14] +
-            t->Phi[186]*f->P[18][14] + t->Phi[187]*f->P[19][14] + t->Phi[188]*f->P[20][14];
-    w->M[15] = t->Phi[168]*f->P[0][15] + t->Phi[169]*f->P[1][15] + t->Phi[170]*f->P[2][15] +
-            t->Phi[171]*f->P[3][15] + t->Phi[172]*f->P[4][15] + t->Phi[173]*f->P[5][15] +
-            t->Phi[174]*f->P[6][15] + t->Phi[175]*f->P[7][15] + t->Phi[176]*f->P[8][15] +
-            t->Phi[177]*f->P[9][15] + t->Phi[178]*f->P[10][15] + t->Phi[179]*f->P[11][15] +
-            t->Phi[180]*f->P[12][15] + t->Phi[181]*f->P[13][15] + t->Phi[182]*f->P[14][15] +
-            t->Phi[183]*f->P[15][15] + t->Phi[184]*f->P[16][15] + t->Phi[185]*f->P[17][15] +
-            t->Phi[186]*f->P[18][15] + t->Phi[187]*f->P[19][15] + t->Phi[188]*f->P[20][15];
-    w->M[16] = t->Phi[168]*f->P[0][16] + t->Phi[169]*f->P[1][16] + t->Phi[170]*f->P[2][16] +
-            t->Phi[171]*f->P[3][16] + t->Phi[172]*f->P[4][16] + t->Phi[173]*f->P[5][16] +
-            t->Phi[174]*f->P[6][16] + t->Phi[175]*f->P[7][16] + t->Phi[176]*f->P[8][16] +
-            t->Phi[177]*f->P[9][16] + t->Phi[178]*f->P[10][16] + t->Phi[179]*f->P[11][16] +
-            t->Phi[180]*f->P[12][16] + t->Phi[181]*f->P[13][16] + t->Phi[182]*f->P[14][16] +
-            t->Phi[183]*f->P[15][16] + t->Phi[184]*f->P[16][16] + t->Phi[185]*f->P[17][16] +
-            t->Phi[186]*f->P[18][16] + t->Phi[187]*f->P[19][16] + t->Phi[188]*f->P[20][16];
-    w->M[17] = t->Phi[168]*f->P[0][17] + t->Phi[169]*f->P[1][17] + t->Phi[170]*f->P[2][17] +
-            t->Phi[171]*f->P[3][17] + t->Phi[172]*f->P[4][17] + t->Phi[173]*f->P[5][17] +
-            t->Phi[174]*f->P[6][17] + t->Phi[175]*f->P[7][17] + t->Phi[176]*f->P[8][17] +
-            t->Phi[177]*f->P[9][17] + t->Phi[178]*f->P[10][17] + t->Phi[179]*f->P[11][17] +
-            t->Phi[180]*f->P[12][17] + t->Phi[181]*f->P[13][17] + t->Phi[182]*f->P[14][17] +
-            t->Phi[183]*f->P[15][17] + t->Phi[184]*f->P[16][17] + t->Phi[185]*f->P[17][17] +
-            t->Phi[186]*f->P[18][17] + t->Phi[187]*f->P[19][17] + t->Phi[188]*f->P[20][17];
-    w->M[18] = t->Phi[168]*f->P[0][18] + t->Phi[169]*f->P[1][18] + t->Phi[170]*f->P[2][18] +
-            t->Phi[171]*f->P[3][18] + t->Phi[172]*f->P[4][18] + t->Phi[173]*f->P[5][18] +
-            t->Phi[174]*f->P[6][18] + t->Phi[175]*f->P[7][18] + t->Phi[176]*f->P[8][18] +
-            t->Phi[177]*f->P[9][18] + t->Phi[178]*f->P[10][18] + t->Phi[179]*f->P[11][18] +
-            t->Phi[180]*f->P[12][18] + t->Phi[181]*f->P[13][18] + t->Phi[182]*f->P[14][18] +
-            t->Phi[183]*f->P[15][18] + t->Phi[184]*f->P[16][18] + t->Phi[185]*f->P[17][18] +
-            t->Phi[186]*f->P[18][18] + t->Phi[187]*f->P[19][18] + t->Phi[188]*f->P[20][18];
-    w->M[19] = t->Phi[168]*f->P[0][19] + t->Phi[169]*f->P[1][19] + t->Phi[170]*f->P[2][19] +
-            t->Phi[171]*f->P[3][19] + t->Phi[172]*f->P[4][19] + t->Phi[173]*f->P[5][19] +
-            t->Phi[174]*f->P[6][19] + t->Phi[175]*f->P[7][19] + t->Phi[176]*f->P[8][19] +
-            t->Phi[177]*f->P[9][19] + t->Phi[178]*f->P[10][19] + t->Phi[179]*f->P[11][19] +
-            t->Phi[180]*f->P[12][19] + t->Phi[181]*f->P[13][19] + t->Phi[182]*f->P[14][19] +
-            t->Phi[183]*f->P[15][19] + t->Phi[184]*f->P[16][19] + t->Phi[185]*f->P[17][19] +
-            t->Phi[186]*f->P[18][19] + t->Phi[187]*f->P[19][19] + t->Phi[188]*f->P[20][19];
+    int c;
+    lane_pair b[21];
+    b[0] = lane_pair_of(t->Phi[168], t->Phi[168]);
+    b[1] = lane_pair_of(t->Phi[169], t->Phi[169]);
+    b[2] = lane_pair_of(t->Phi[170], t->Phi[170]);
+    b[3] = lane_pair_of(t->Phi[171], t->Phi[171]);
+    b[4] = lane_pair_of(t->Phi[172], t->Phi[172]);
+    b[5] = lane_pair_of(t->Phi[173], t->Phi[173]);
+    b[6] = lane_pair_of(t->Phi[174], t->Phi[174]);
+    b[7] = lane_pair_of(t->Phi[175], t->Phi[175]);
+    b[8] = lane_pair_of(t->Phi[176], t->Phi[176]);
+    b[9] = lane_pair_of(t->Phi[177], t->Phi[177]);
+    b[10] = lane_pair_of(t->Phi[178], t->Phi[178]);
+    b[11] = lane_pair_of(t->Phi[179], t->Phi[179]);
+    b[12] = lane_pair_of(t->Phi[180], t->Phi[180]);
+    b[13] = lane_pair_of(t->Phi[181], t->Phi[181]);
+    b[14] = lane_pair_of(t->Phi[182], t->Phi[182]);
+    b[15] = lane_pair_of(t->Phi[183], t->Phi[183]);
+    b[16] = lane_pair_of(t->Phi[184], t->Phi[184]);
+    b[17] = lane_pair_of(t->Phi[185], t->Phi[185]);
+    b[18] = lane_pair_of(t->Phi[186], t->Phi[186]);
+    b[19] = lane_pair_of(t->Phi[187], t->Phi[187]);
+    b[20] = lane_pair_of(t->Phi[188], t->Phi[188]);
+    for (c = 0; c + 1 < 21; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[16][c]));
+        acc = lane_pair_add_product(acc, b[17], lane_pair_load(&f->P[17][c]));
+        acc = lane_pair_add_product(acc, b[18], lane_pair_load(&f->P[18][c]));
+        acc = lane_pair_add_product(acc, b[19], lane_pair_load(&f->P[19][c]));
+        acc = lane_pair_add_product(acc, b[20], lane_pair_load(&f->P[20][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[20] = t->Phi[168]*f->P[0][20] + t->Phi[169]*f->P[1][20] + t->Phi[170]*f->P[2][20] +
             t->Phi[171]*f->P[3][20] + t->Phi[172]*f->P[4][20] + t->Phi[173]*f->P[5][20] +
             t->Phi[174]*f->P[6][20] + t->Phi[175]*f->P[7][20] + t->Phi[176]*f->P[8][20] +

@@ -962,59 +962,185 @@ INS_GPS15_BLOCK void horner_last_into_S(ins_gps15_discretize_scratch *restrict w
 
 INS_GPS15_BLOCK void horner_unit_columns(ins_gps15_discretize_scratch *restrict w)
 {
-    w->S[72] = w->term[1][0]*w->fh[4] + w->term[1][1]*w->fh[12] + w->term[1][2]*w->fh[20];
-    w->S[73] = w->term[1][0]*w->fh[5] + w->term[1][1]*w->fh[13] + w->term[1][2]*w->fh[21];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&w->S[72], pair);
+    }
     w->S[74] = w->term[1][0]*w->fh[6] + w->term[1][1]*w->fh[14] + w->term[1][2]*w->fh[22];
-    w->S[75] = w->term[1][3]*w->fh[30] + w->term[1][4]*w->fh[40] + w->term[1][5]*w->fh[49];
-    w->S[76] = w->term[1][3]*w->fh[31] + w->term[1][4]*w->fh[41] + w->term[1][5]*w->fh[50];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][3], w->term[1][3]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][4], w->term[1][4]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][5], w->term[1][5]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[75], pair);
+    }
     w->S[77] = w->term[1][3]*w->fh[32] + w->term[1][4]*w->fh[42] + w->term[1][5]*w->fh[51];
-    w->S[78] = w->term[1][8]*w->fh[4] + w->term[1][9]*w->fh[12] + w->term[1][10]*w->fh[20];
-    w->S[79] = w->term[1][8]*w->fh[5] + w->term[1][9]*w->fh[13] + w->term[1][10]*w->fh[21];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][8], w->term[1][8]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][9], w->term[1][9]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][10], w->term[1][10]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&w->S[78], pair);
+    }
     w->S[80] = w->term[1][8]*w->fh[6] + w->term[1][9]*w->fh[14] + w->term[1][10]*w->fh[22];
-    w->S[81] = w->term[1][11]*w->fh[30] + w->term[1][12]*w->fh[40] + w->term[1][13]*w->fh[49];
-    w->S[82] = w->term[1][11]*w->fh[31] + w->term[1][12]*w->fh[41] + w->term[1][13]*w->fh[50];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][11], w->term[1][11]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][12], w->term[1][12]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[81], pair);
+    }
     w->S[83] = w->term[1][11]*w->fh[32] + w->term[1][12]*w->fh[42] + w->term[1][13]*w->fh[51];
-    w->S[84] = w->term[1][16]*w->fh[4] + w->term[1][17]*w->fh[12] + w->term[1][18]*w->fh[20];
-    w->S[85] = w->term[1][16]*w->fh[5] + w->term[1][17]*w->fh[13] + w->term[1][18]*w->fh[21];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][16], w->term[1][16]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][17], w->term[1][17]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][18], w->term[1][18]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&w->S[84], pair);
+    }
     w->S[86] = w->term[1][16]*w->fh[6] + w->term[1][17]*w->fh[14] + w->term[1][18]*w->fh[22];
-    w->S[87] = w->term[1][19]*w->fh[30] + w->term[1][20]*w->fh[40] + w->term[1][21]*w->fh[49];
-    w->S[88] = w->term[1][19]*w->fh[31] + w->term[1][20]*w->fh[41] + w->term[1][21]*w->fh[50];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][19], w->term[1][19]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][20], w->term[1][20]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][21], w->term[1][21]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[87], pair);
+    }
     w->S[89] = w->term[1][19]*w->fh[32] + w->term[1][20]*w->fh[42] + w->term[1][21]*w->fh[51];
-    w->S[90] = w->term[1][24]*w->fh[4] + w->term[1][25]*w->fh[12] + w->term[1][26]*w->fh[20];
-    w->S[91] = w->term[1][24]*w->fh[5] + w->term[1][25]*w->fh[13] + w->term[1][26]*w->fh[21];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&w->S[90], pair);
+    }
     w->S[92] = w->term[1][24]*w->fh[6] + w->term[1][25]*w->fh[14] + w->term[1][26]*w->fh[22];
-    w->S[93] = w->term[1][27]*w->fh[30] + w->term[1][28]*w->fh[40] + w->term[1][29]*w->fh[49];
-    w->S[94] = w->term[1][27]*w->fh[31] + w->term[1][28]*w->fh[41] + w->term[1][29]*w->fh[50];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][27], w->term[1][27]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][28], w->term[1][28]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][29], w->term[1][29]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[93], pair);
+    }
     w->S[95] = w->term[1][27]*w->fh[32] + w->term[1][28]*w->fh[42] + w->term[1][29]*w->fh[51];
-    w->S[96] = w->term[1][32]*w->fh[4] + w->term[1][33]*w->fh[12] + w->term[1][34]*w->fh[20];
-    w->S[97] = w->term[1][32]*w->fh[5] + w->term[1][33]*w->fh[13] + w->term[1][34]*w->fh[21];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][32], w->term[1][32]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][33], w->term[1][33]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][34], w->term[1][34]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&w->S[96], pair);
+    }
     w->S[98] = w->term[1][32]*w->fh[6] + w->term[1][33]*w->fh[14] + w->term[1][34]*w->fh[22];
-    w->S[99] = w->term[1][35]*w->fh[30] + w->term[1][36]*w->fh[40] + w->term[1][37]*w->fh[49];
-    w->S[100] = w->term[1][35]*w->fh[31] + w->term[1][36]*w->fh[41] + w->term[1][37]*w->fh[50];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][35], w->term[1][35]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][36], w->term[1][36]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[99], pair);
+    }
     w->S[101] = w->term[1][35]*w->fh[32] + w->term[1][36]*w->fh[42] + w->term[1][37]*w->fh[51];
-    w->S[102] = w->term[1][40]*w->fh[4] + w->term[1][41]*w->fh[12] + w->term[1][42]*w->fh[20];
-    w->S[103] = w->term[1][40]*w->fh[5] + w->term[1][41]*w->fh[13] + w->term[1][42]*w->fh[21];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][40], w->term[1][40]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][41], w->term[1][41]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][42], w->term[1][42]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&w->S[102], pair);
+    }
     w->S[104] = w->term[1][40]*w->fh[6] + w->term[1][41]*w->fh[14] + w->term[1][42]*w->fh[22];
-    w->S[105] = w->term[1][43]*w->fh[30] + w->term[1][44]*w->fh[40] + w->term[1][45]*w->fh[49];
-    w->S[106] = w->term[1][43]*w->fh[31] + w->term[1][44]*w->fh[41] + w->term[1][45]*w->fh[50];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][43], w->term[1][43]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][44], w->term[1][44]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][45], w->term[1][45]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[105], pair);
+    }
     w->S[107] = w->term[1][43]*w->fh[32] + w->term[1][44]*w->fh[42] + w->term[1][45]*w->fh[51];
-    w->S[108] = w->term[1][48]*w->fh[4] + w->term[1][49]*w->fh[12] + w->term[1][50]*w->fh[20];
-    w->S[109] = w->term[1][48]*w->fh[5] + w->term[1][49]*w->fh[13] + w->term[1][50]*w->fh[21];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&w->S[108], pair);
+    }
     w->S[110] = w->term[1][48]*w->fh[6] + w->term[1][49]*w->fh[14] + w->term[1][50]*w->fh[22];
-    w->S[111] = w->term[1][51]*w->fh[30] + w->term[1][52]*w->fh[40] + w->term[1][53]*w->fh[49];
-    w->S[112] = w->term[1][51]*w->fh[31] + w->term[1][52]*w->fh[41] + w->term[1][53]*w->fh[50];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][51], w->term[1][51]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][52], w->term[1][52]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][53], w->term[1][53]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[111], pair);
+    }
     w->S[113] = w->term[1][51]*w->fh[32] + w->term[1][52]*w->fh[42] + w->term[1][53]*w->fh[51];
-    w->S[115] = w->term[1][56]*w->fh[4] + w->term[1][57]*w->fh[12] + w->term[1][58]*w->fh[20];
-    w->S[116] = w->term[1][56]*w->fh[5] + w->term[1][57]*w->fh[13] + w->term[1][58]*w->fh[21];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][56], w->term[1][56]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][57], w->term[1][57]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][58], w->term[1][58]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&w->S[115], pair);
+    }
     w->S[117] = w->term[1][56]*w->fh[6] + w->term[1][57]*w->fh[14] + w->term[1][58]*w->fh[22];
-    w->S[118] = w->term[1][59]*w->fh[30] + w->term[1][60]*w->fh[40] + w->term[1][61]*w->fh[49];
-    w->S[119] = w->term[1][59]*w->fh[31] + w->term[1][60]*w->fh[41] + w->term[1][61]*w->fh[50];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][59], w->term[1][59]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][60], w->term[1][60]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[118], pair);
+    }
     w->S[120] = w->term[1][59]*w->fh[32] + w->term[1][60]*w->fh[42] + w->term[1][61]*w->fh[51];
-    w->S[121] = w->term[1][64]*w->fh[4] + w->term[1][65]*w->fh[12] + w->term[1][66]*w->fh[20];
-    w->S[122] = w->term[1][64]*w->fh[5] + w->term[1][65]*w->fh[13] + w->term[1][66]*w->fh[21];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][64], w->term[1][64]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][65], w->term[1][65]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][66], w->term[1][66]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&w->S[121], pair);
+    }
     w->S[123] = w->term[1][64]*w->fh[6] + w->term[1][65]*w->fh[14] + w->term[1][66]*w->fh[22];
-    w->S[124] = w->term[1][67]*w->fh[30] + w->term[1][68]*w->fh[40] + w->term[1][69]*w->fh[49];
-    w->S[125] = w->term[1][67]*w->fh[31] + w->term[1][68]*w->fh[41] + w->term[1][69]*w->fh[50];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][67], w->term[1][67]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][68], w->term[1][68]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][69], w->term[1][69]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[124], pair);
+    }
     w->S[126] = w->term[1][67]*w->fh[32] + w->term[1][68]*w->fh[42] + w->term[1][69]*w->fh[51];
 }
 
@@ -1093,59 +1219,185 @@ INS_GPS15_BLOCK void horner_transition(ins_gps15_transition *restrict t, const
     for (k = 0; k < 1; ++k) {
         t->Phi[120+k] = w->fh[57]*w->S[47+k];
     }
-    t->Phi[8] = w->S[0]*w->fh[4] + w->S[1]*w->fh[12] + w->S[2]*w->fh[20];
-    t->Phi[9] = w->S[0]*w->fh[5] + w->S[1]*w->fh[13] + w->S[2]*w->fh[21];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&t->Phi[8], pair);
+    }
     t->Phi[10] = w->S[0]*w->fh[6] + w->S[1]*w->fh[14] + w->S[2]*w->fh[22];
-    t->Phi[11] = w->S[3]*w->fh[30] + w->S[4]*w->fh[40] + w->S[5]*w->fh[49];
-    t->Phi[12] = w->S[3]*w->fh[31] + w->S[4]*w->fh[41] + w->S[5]*w->fh[50];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[3], w->S[3]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[4], w->S[4]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[5], w->S[5]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[11], pair);
+    }
     t->Phi[13] = w->S[3]*w->fh[32] + w->S[4]*w->fh[42] + w->S[5]*w->fh[51];
-    t->Phi[22] = w->S[8]*w->fh[4] + w->S[9]*w->fh[12] + w->S[10]*w->fh[20];
-    t->Phi[23] = w->S[8]*w->fh[5] + w->S[9]*w->fh[13] + w->S[10]*w->fh[21];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[8], w->S[8]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[9], w->S[9]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[10], w->S[10]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&t->Phi[22], pair);
+    }
     t->Phi[24] = w->S[8]*w->fh[6] + w->S[9]*w->fh[14] + w->S[10]*w->fh[22];
-    t->Phi[25] = w->S[11]*w->fh[30] + w->S[12]*w->fh[40] + w->S[13]*w->fh[49];
-    t->Phi[26] = w->S[11]*w->fh[31] + w->S[12]*w->fh[41] + w->S[13]*w->fh[50];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[11], w->S[11]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[12], w->S[12]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[25], pair);
+    }
     t->Phi[27] = w->S[11]*w->fh[32] + w->S[12]*w->fh[42] + w->S[13]*w->fh[51];
-    t->Phi[36] = w->S[16]*w->fh[4] + w->S[17]*w->fh[12] + w->S[18]*w->fh[20];
-    t->Phi[37] = w->S[16]*w->fh[5] + w->S[17]*w->fh[13] + w->S[18]*w->fh[21];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[16], w->S[16]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[17], w->S[17]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[18], w->S[18]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&t->Phi[36], pair);
+    }
     t->Phi[38] = w->S[16]*w->fh[6] + w->S[17]*w->fh[14] + w->S[18]*w->fh[22];
-    t->Phi[39] = w->S[19]*w->fh[30] + w->S[20]*w->fh[40] + w->S[21]*w->fh[49];
-    t->Phi[40] = w->S[19]*w->fh[31] + w->S[20]*w->fh[41] + w->S[21]*w->fh[50];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[19], w->S[19]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[20], w->S[20]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[21], w->S[21]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[39], pair);
+    }
     t->Phi[41] = w->S[19]*w->fh[32] + w->S[20]*w->fh[42] + w->S[21]*w->fh[51];
-    t->Phi[50] = w->S[24]*w->fh[4] + w->S[25]*w->fh[12] + w->S[26]*w->fh[20];
-    t->Phi[51] = w->S[24]*w->fh[5] + w->S[25]*w->fh[13] + w->S[26]*w->fh[21];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&t->Phi[50], pair);
+    }
     t->Phi[52] = w->S[24]*w->fh[6] + w->S[25]*w->fh[14] + w->S[26]*w->fh[22];
-    t->Phi[53] = w->S[27]*w->fh[30] + w->S[28]*w->fh[40] + w->S[29]*w->fh[49];
-    t->Phi[54] = w->S[27]*w->fh[31] + w->S[28]*w->fh[41] + w->S[29]*w->fh[50];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[27], w->S[27]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[28], w->S[28]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[29], w->S[29]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[53], pair);
+    }
     t->Phi[55] = w->S[27]*w->fh[32] + w->S[28]*w->fh[42] + w->S[29]*w->fh[51];
-    t->Phi[64] = w->S[32]*w->fh[4] + w->S[33]*w->fh[12] + w->S[34]*w->fh[20];
-    t->Phi[65] = w->S[32]*w->fh[5] + w->S[33]*w->fh[13] + w->S[34]*w->fh[21];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[32], w->S[32]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[33], w->S[33]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[34], w->S[34]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&t->Phi[64], pair);
+    }
     t->Phi[66] = w->S[32]*w->fh[6] + w->S[33]*w->fh[14] + w->S[34]*w->fh[22];
-    t->Phi[67] = w->S[35]*w->fh[30] + w->S[36]*w->fh[40] + w->S[37]*w->fh[49];
-    t->Phi[68] = w->S[35]*w->fh[31] + w->S[36]*w->fh[41] + w->S[37]*w->fh[50];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[35], w->S[35]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[36], w->S[36]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[67], pair);
+    }
     t->Phi[69] = w->S[35]*w->fh[32] + w->S[36]*w->fh[42] + w->S[37]*w->fh[51];
-    t->Phi[78] = w->S[40]*w->fh[4] + w->S[41]*w->fh[12] + w->S[42]*w->fh[20];
-    t->Phi[79] = w->S[40]*w->fh[5] + w->S[41]*w->fh[13] + w->S[42]*w->fh[21];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[40], w->S[40]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[41], w->S[41]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[42], w->S[42]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&t->Phi[78], pair);
+    }
     t->Phi[80] = w->S[40]*w->fh[6] + w->S[41]*w->fh[14] + w->S[42]*w->fh[22];
-    t->Phi[81] = w->S[43]*w->fh[30] + w->S[44]*w->fh[40] + w->S[45]*w->fh[49];
-    t->Phi[82] = w->S[43]*w->fh[31] + w->S[44]*w->fh[41] + w->S[45]*w->fh[50];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[43], w->S[43]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[44], w->S[44]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[45], w->S[45]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[81], pair);
+    }
     t->Phi[83] = w->S[43]*w->fh[32] + w->S[44]*w->fh[42] + w->S[45]*w->fh[51];
-    t->Phi[92] = w->S[48]*w->fh[4] + w->S[49]*w->fh[12] + w->S[50]*w->fh[20];
-    t->Phi[93] = w->S[48]*w->fh[5] + w->S[49]*w->fh[13] + w->S[50]*w->fh[21];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&t->Phi[92], pair);
+    }
     t->Phi[94] = w->S[48]*w->fh[6] + w->S[49]*w->fh[14] + w->S[50]*w->fh[22];
-    t->Phi[95] = w->S[51]*w->fh[30] + w->S[52]*w->fh[40] + w->S[53]*w->fh[49];
-    t->Phi[96] = w->S[51]*w->fh[31] + w->S[52]*w->fh[41] + w->S[53]*w->fh[50];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[51], w->S[51]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[52], w->S[52]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[53], w->S[53]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[95], pair);
+    }
     t->Phi[97] = w->S[51]*w->fh[32] + w->S[52]*w->fh[42] + w->S[53]*w->fh[51];
-    t->Phi[107] = w->S[56]*w->fh[4] + w->S[57]*w->fh[12] + w->S[58]*w->fh[20];
-    t->Phi[108] = w->S[56]*w->fh[5] + w->S[57]*w->fh[13] + w->S[58]*w->fh[21];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[56], w->S[56]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[57], w->S[57]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[58], w->S[58]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&t->Phi[107], pair);
+    }
     t->Phi[109] = w->S[56]*w->fh[6] + w->S[57]*w->fh[14] + w->S[58]*w->fh[22];
-    t->Phi[110] = w->S[59]*w->fh[30] + w->S[60]*w->fh[40] + w->S[61]*w->fh[49];
-    t->Phi[111] = w->S[59]*w->fh[31] + w->S[60]*w->fh[41] + w->S[61]*w->fh[50];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[59], w->S[59]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[60], w->S[60]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[110], pair);
+    }
     t->Phi[112] = w->S[59]*w->fh[32] + w->S[60]*w->fh[42] + w->S[61]*w->fh[51];
-    t->Phi[121] = w->S[64]*w->fh[4] + w->S[65]*w->fh[12] + w->S[66]*w->fh[20];
-    t->Phi[122] = w->S[64]*w->fh[5] + w->S[65]*w->fh[13] + w->S[66]*w->fh[21];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[64], w->S[64]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[65], w->S[65]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[66], w->S[66]),
+                lane_pair_load(&w->fh[20]));
+        lane_pair_store(&t->Phi[121], pair);
+    }
     t->Phi[123] = w->S[64]*w->fh[6] + w->S[65]*w->fh[14] + w->S[66]*w->fh[22];
-    t->Phi[124] = w->S[67]*w->fh[30] + w->S[68]*w->fh[40] + w->S[69]*w->fh[49];
-    t->Phi[125] = w->S[67]*w->fh[31] + w->S[68]*w->fh[41] + w->S[69]*w->fh[50];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[67], w->S[67]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[68], w->S[68]),
+                lane_pair_load(&w->fh[40]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[69], w->S[69]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[124], pair);
+    }
     t->Phi[126] = w->S[67]*w->fh[32] + w->S[68]*w->fh[42] + w->S[69]*w->fh[51];
     t->Phi[105] = 0;
     t->Phi[127] = one;
@@ -1700,71 +1952,203 @@ INS_GPS15_BLOCK ins_gps15_scalar transition_check(ins_gps15_transition *restrict
 INS_GPS15_BLOCK void noise_input(const ins_gps15_matrices *restrict m, ins_gps15_discretize_scratch
         *restrict w)
 {
-    w->term[0][0] = w->S[0]*m->G[0] + w->S[1]*m->G[3] + w->S[2]*m->G[6];
-    w->term[0][1] = w->S[0]*m->G[1] + w->S[1]*m->G[4] + w->S[2]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][0], pair);
+    }
     w->term[0][2] = w->S[0]*m->G[2] + w->S[1]*m->G[5] + w->S[2]*m->G[8];
-    w->term[0][3] = w->S[3]*m->G[9] + w->S[4]*m->G[12] + w->S[5]*m->G[15];
-    w->term[0][4] = w->S[3]*m->G[10] + w->S[4]*m->G[13] + w->S[5]*m->G[16];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[3], w->S[3]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[4], w->S[4]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[5], w->S[5]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][3], pair);
+    }
     w->term[0][5] = w->S[3]*m->G[11] + w->S[4]*m->G[14] + w->S[5]*m->G[17];
-    w->term[0][6] = w->S[8]*m->G[0] + w->S[9]*m->G[3] + w->S[10]*m->G[6];
-    w->term[0][7] = w->S[8]*m->G[1] + w->S[9]*m->G[4] + w->S[10]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[8], w->S[8]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[9], w->S[9]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[10], w->S[10]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][6], pair);
+    }
     w->term[0][8] = w->S[8]*m->G[2] + w->S[9]*m->G[5] + w->S[10]*m->G[8];
-    w->term[0][9] = w->S[11]*m->G[9] + w->S[12]*m->G[12] + w->S[13]*m->G[15];
-    w->term[0][10] = w->S[11]*m->G[10] + w->S[12]*m->G[13] + w->S[13]*m->G[16];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[11], w->S[11]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[12], w->S[12]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][9], pair);
+    }
     w->term[0][11] = w->S[11]*m->G[11] + w->S[12]*m->G[14] + w->S[13]*m->G[17];
-    w->term[0][12] = w->S[16]*m->G[0] + w->S[17]*m->G[3] + w->S[18]*m->G[6];
-    w->term[0][13] = w->S[16]*m->G[1] + w->S[17]*m->G[4] + w->S[18]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[16], w->S[16]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[17], w->S[17]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[18], w->S[18]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][12], pair);
+    }
     w->term[0][14] = w->S[16]*m->G[2] + w->S[17]*m->G[5] + w->S[18]*m->G[8];
-    w->term[0][15] = w->S[19]*m->G[9] + w->S[20]*m->G[12] + w->S[21]*m->G[15];
-    w->term[0][16] = w->S[19]*m->G[10] + w->S[20]*m->G[13] + w->S[21]*m->G[16];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[19], w->S[19]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[20], w->S[20]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[21], w->S[21]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][15], pair);
+    }
     w->term[0][17] = w->S[19]*m->G[11] + w->S[20]*m->G[14] + w->S[21]*m->G[17];
-    w->term[0][18] = w->S[24]*m->G[0] + w->S[25]*m->G[3] + w->S[26]*m->G[6];
-    w->term[0][19] = w->S[24]*m->G[1] + w->S[25]*m->G[4] + w->S[26]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][18], pair);
+    }
     w->term[0][20] = w->S[24]*m->G[2] + w->S[25]*m->G[5] + w->S[26]*m->G[8];
-    w->term[0][21] = w->S[27]*m->G[9] + w->S[28]*m->G[12] + w->S[29]*m->G[15];
-    w->term[0][22] = w->S[27]*m->G[10] + w->S[28]*m->G[13] + w->S[29]*m->G[16];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[27], w->S[27]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[28], w->S[28]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[29], w->S[29]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][21], pair);
+    }
     w->term[0][23] = w->S[27]*m->G[11] + w->S[28]*m->G[14] + w->S[29]*m->G[17];
-    w->term[0][24] = w->S[32]*m->G[0] + w->S[33]*m->G[3] + w->S[34]*m->G[6];
-    w->term[0][25] = w->S[32]*m->G[1] + w->S[33]*m->G[4] + w->S[34]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[32], w->S[32]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[33], w->S[33]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[34], w->S[34]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][24], pair);
+    }
     w->term[0][26] = w->S[32]*m->G[2] + w->S[33]*m->G[5] + w->S[34]*m->G[8];
-    w->term[0][27] = w->S[35]*m->G[9] + w->S[36]*m->G[12] + w->S[37]*m->G[15];
-    w->term[0][28] = w->S[35]*m->G[10] + w->S[36]*m->G[13] + w->S[37]*m->G[16];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[35], w->S[35]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[36], w->S[36]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][27], pair);
+    }
     w->term[0][29] = w->S[35]*m->G[11] + w->S[36]*m->G[14] + w->S[37]*m->G[17];
-    w->term[0][30] = w->S[40]*m->G[0] + w->S[41]*m->G[3] + w->S[42]*m->G[6];
-    w->term[0][31] = w->S[40]*m->G[1] + w->S[41]*m->G[4] + w->S[42]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[40], w->S[40]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[41], w->S[41]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[42], w->S[42]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][30], pair);
+    }
     w->term[0][32] = w->S[40]*m->G[2] + w->S[41]*m->G[5] + w->S[42]*m->G[8];
-    w->term[0][33] = w->S[43]*m->G[9] + w->S[44]*m->G[12] + w->S[45]*m->G[15];
-    w->term[0][34] = w->S[43]*m->G[10] + w->S[44]*m->G[13] + w->S[45]*m->G[16];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[43], w->S[43]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[44], w->S[44]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[45], w->S[45]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][33], pair);
+    }
     w->term[0][35] = w->S[43]*m->G[11] + w->S[44]*m->G[14] + w->S[45]*m->G[17];
-    w->term[0][36] = w->S[48]*m->G[0] + w->S[49]*m->G[3] + w->S[50]*m->G[6];
-    w->term[0][37] = w->S[48]*m->G[1] + w->S[49]*m->G[4] + w->S[50]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][36], pair);
+    }
     w->term[0][38] = w->S[48]*m->G[2] + w->S[49]*m->G[5] + w->S[50]*m->G[8];
-    w->term[0][39] = w->S[51]*m->G[9] + w->S[52]*m->G[12] + w->S[53]*m->G[15];
-    w->term[0][40] = w->S[51]*m->G[10] + w->S[52]*m->G[13] + w->S[53]*m->G[16];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[51], w->S[51]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[52], w->S[52]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[53], w->S[53]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][39], pair);
+    }
     w->term[0][41] = w->S[51]*m->G[11] + w->S[52]*m->G[14] + w->S[53]*m->G[17];
-    w->term[0][42] = w->S[56]*m->G[0] + w->S[57]*m->G[3] + w->S[58]*m->G[6];
-    w->term[0][43] = w->S[56]*m->G[1] + w->S[57]*m->G[4] + w->S[58]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[56], w->S[56]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[57], w->S[57]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[58], w->S[58]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][42], pair);
+    }
     w->term[0][44] = w->S[56]*m->G[2] + w->S[57]*m->G[5] + w->S[58]*m->G[8];
-    w->term[0][45] = w->S[59]*m->G[9] + w->S[60]*m->G[12] + w->S[61]*m->G[15];
-    w->term[0][46] = w->S[59]*m->G[10] + w->S[60]*m->G[13] + w->S[61]*m->G[16];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[59], w->S[59]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[60], w->S[60]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][45], pair);
+    }
     w->term[0][47] = w->S[59]*m->G[11] + w->S[60]*m->G[14] + w->S[61]*m->G[17];
-    w->term[0][48] = w->S[64]*m->G[0] + w->S[65]*m->G[3] + w->S[66]*m->G[6];
-    w->term[0][49] = w->S[64]*m->G[1] + w->S[65]*m->G[4] + w->S[66]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[64], w->S[64]),
+                lane_pair_load(&m->G[0]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[65], w->S[65]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[66], w->S[66]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][48], pair);
+    }
     w->term[0][50] = w->S[64]*m->G[2] + w->S[65]*m->G[5] + w->S[66]*m->G[8];
-    w->term[0][51] = w->S[67]*m->G[9] + w->S[68]*m->G[12] + w->S[69]*m->G[15];
-    w->term[0][52] = w->S[67]*m->G[10] + w->S[68]*m->G[13] + w->S[69]*m->G[16];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[67], w->S[67]),
+                lane_pair_load(&m->G[9]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[68], w->S[68]),
+                lane_pair_load(&m->G[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[69], w->S[69]),
+                lane_pair_load(&m->G[15]));
+        lane_pair_store(&w->term[0][51], pair);
+    }
     w->term[0][53] = w->S[67]*m->G[11] + w->S[68]*m->G[14] + w->S[69]*m->G[17];
 }
 
 INS_GPS15_BLOCK void process_noise(const ins_gps15_matrices *restrict m, ins_gps15_transition
         *restrict t, ins_gps15_discretize_scratch *restrict w, const ins_gps15_scalar T)
 {
-    w->term[1][54] = T*m->q[0];
-    w->term[1][55] = T*m->q[1];
-    w->term[1][56] = T*m->q[2];
-    w->term[1][57] = T*m->q[3];
-    w->term[1][58] = T*m->q[4];
-    w->term[1][59] = T*m->q[5];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[0]));
+        lane_pair_store(&w->term[1][54], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[2]));
+        lane_pair_store(&w->term[1][56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[4]));
+        lane_pair_store(&w->term[1][58], pair);
+    }
     w->term[1][0] = w->term[0][0]*w->term[1][54];
     w->term[1][1] = w->term[0][1]*w->term[1][55];
     w->term[1][2] = w->term[0][2]*w->term[1][56];
@@ -2569,76 +2953,39 @@ INS_GPS15_BLOCK void state_predict(const ins_gps15_filter *restrict f, const ins
 INS_GPS15_BLOCK void phi_times_p_row_0(const ins_gps15_filter *restrict f, const
         ins_gps15_transition *restrict t, ins_gps15_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[0]*f->P[0][0] + t->Phi[1]*f->P[1][0] + t->Phi[2]*f->P[2][0] +
-            t->Phi[3]*f->P[3][0] + t->Phi[4]*f->P[4][0] + t->Phi[5]*f->P[5][0] +
-            t->Phi[6]*f->P[6][0] + t->Phi[7]*f->P[8][0] + t->Phi[8]*f->P[9][0] +
-            t->Phi[9]*f->P[10][0] + t->Phi[10]*f->P[11][0] + t->Phi[11]*f->P[12][0] +
-            t->Phi[12]*f->P[13][0] + t->Phi[13]*f->P[14][0];
-    w->M[1] = t->Phi[0]*f->P[0][1] + t->Phi[1]*f->P[1][1] + t->Phi[2]*f->P[2][1] +
-            t->Phi[3]*f->P[3][1] + t->Phi[4]*f->P[4][1] + t->Phi[5]*f->P[5][1] +
-            t->Phi[6]*f->P[6][1] + t->Phi[7]*f->P[8][1] + t->Phi[8]*f->P[9][1] +
-            t->Phi[9]*f->P[10][1] + t->Phi[10]*f->P[11][1] + t->Phi[11]*f->P[12][1] +
-            t->Phi[12]*f->P[13][1] + t->Phi[13]*f->P[14][1];
-    w->M[2] = t->Phi[0]*f->P[0][2] + t->Phi[1]*f->P[1][2] + t->Phi[2]*f->P[2][2] +
-            t->Phi[3]*f->P[3][2] + t->Phi[4]*f->P[4][2] + t->Phi[5]*f->P[5][2] +
-            t->Phi[6]*f->P[6][2] + t->Phi[7]*f->P[8][2] + t->Phi[8]*f->P[9][2] +
-            t->Phi[9]*f->P[10][2] + t->Phi[10]*f->P[11][2] + t->Phi[11]*f->P[12][2] +
-            t->Phi[12]*f->P[13][2] + t->Phi[13]*f->P[14][2];
-    w->M[3] = t->Phi[0]*f->P[0][3] + t->Phi[1]*f->P[1][3] + t->Phi[2]*f->P[2][3] +
-            t->Phi[3]*f->P[3][3] + t->Phi[4]*f->P[4][3] + t->Phi[5]*f->P[5][3] +
-            t->Phi[6]*f->P[6][3] + t->Phi[7]*f->P[8][3] + t->Phi[8]*f->P[9][3] +
-            t->Phi[9]*f->P[10][3] + t->Phi[10]*f->P[11][3] + t->Phi[11]*f->P[12][3] +
-            t->Phi[12]*f->P[13][3] + t->Phi[13]*f->P[14][3];
-    w->M[4] = t->Phi[0]*f->P[0][4] + t->Phi[1]*f->P[1][4] + t->Phi[2]*f->P[2][4] +
-            t->Phi[3]*f->P[3][4] + t->Phi[4]*f->P[4][4] + t->Phi[5]*f->P[5][4] +
-            t->Phi[6]*f->P[6][4] + t->Phi[7]*f->P[8][4] + t->Phi[8]*f->P[9][4] +
-            t->Phi[9]*f->P[10][4] + t->Phi[10]*f->P[11][4] + t->Phi[11]*f->P[12][4] +
-            t->Phi[12]*f->P[13][4] + t->Phi[13]*f->P[14][4];
-    w->M[5] = t->Phi[0]*f->P[0][5] + t->Phi[1]*f->P[1][5] + t->Phi[2]*f->P[2][5] +
-            t->Phi[3]*f->P[3][5] + t->Phi[4]*f->P[4][5] + t->Phi[5]*f->P[5][5] +
-            t->Phi[6]*f->P[6][5] + t->Phi[7]*f->P[8][5] + t->Phi[8]*f->P[9][5] +
-            t->Phi[9]*f->P[10][5] + t->Phi[10]*f->P[11][5] + t->Phi[11]*f->P[12][5] +
-            t->Phi[12]*f->P[13][5] + t->Phi[13]*f->P[14][5];
-    w->M[6] = t->Phi[0]*f->P[0][6] + t->Phi[1]*f->P[1][6] + t->Phi[2]*f->P[2][6] +
-            t->Phi[3]*f->P[3][6] + t->Phi[4]*f->P[4][6] + t->Phi[5]*f->P[5][6] +
-            t->Phi[6]*f->P[6][6] + t->Phi[7]*f->P[8][6] + t->Phi[8]*f->P[9][6] +
-            t->Phi[9]*f->P[10][6] + t->Phi[10]*f->P[11][6] + t->Phi[11]*f->P[12][6] +
-            t->Phi[12]*f->P[13][6] + t->Phi[13]*f->P[14][6];
-    w->M[7] = t->Phi[0]*f->P[0][7] + t->Phi[1]*f->P[1][7] + t->Phi[2]*f->P[2][7] +
-            t->Phi[3]*f->P[3][7] + t->Phi[4]*f->P[4][7] + t->Phi[5]*f->P[5][7] +
-            t->Phi[6]*f->P[6][7] + t->Phi[7]*f->P[8][7] + t->Phi[8]*f->P[9][7] +
-            t->Phi[9]*f->P[10][7] + t->Phi[10]*f->P[11][7] + t->Phi[11]*f->P[12][7] +
-            t->Phi[12]*f->P[13][7] + t->Phi[13]*f->P[14][7];
-    w->M[8] = t->Phi[0]*f->P[0][8] + t->Phi[1]*f->P[1][8] + t->Phi[2]*f->P[2][8] +
-            t->Phi[3]*f->P[3][8] + t->Phi[4]*f->P[4][8] + t->Phi[5]*f->P[5][8] +
-            t->Phi[6]*f->P[6][8] + t->Phi[7]*f->P[8][8] + t->Phi[8]*f->P[9][8] +
-            t->Phi[9]*f->P[10][8] + t->Phi[10]*f->P[11][8] + t->Phi[11]*f->P[12][8] +
-            t->Phi[12]*f->P[13][8] + t->Phi[13]*f->P[14][8];
-    w->M[9] = t->Phi[0]*f->P[0][9] + t->Phi[1]*f->P[1][9] + t->Phi[2]*f->P[2][9] +
-            t->Phi[3]*f->P[3][9] + t->Phi[4]*f->P[4][9] + t->Phi[5]*f->P[5][9] +
-            t->Phi[6]*f->P[6][9] + t->Phi[7]*f->P[8][9] + t->Phi[8]*f->P[9][9] +
-            t->Phi[9]*f->P[10][9] + t->Phi[10]*f->P[11][9] + t->Phi[11]*f->P[12][9] +
-            t->Phi[12]*f->P[13][9] + t->Phi[13]*f->P[14][9];
-    w->M[10] = t->Phi[0]*f->P[0][10] + t->Phi[1]*f->P[1][10] + t->Phi[2]*f->P[2][10] +
-            t->Phi[3]*f->P[3][10] + t->Phi[4]*f->P[4][10] + t->Phi[5]*f->P[5][10] +
-            t->Phi[6]*f->P[6][10] + t->Phi[7]*f->P[8][10] + t->Phi[8]*f->P[9][10] +
-            t->Phi[9]*f->P[10][10] + t->Phi[10]*f->P[11][10] + t->Phi[11]*f->P[12][10] +
-            t->Phi[12]*f->P[13][10] + t->Phi[13]*f->P[14][10];
-    w->M[11] = t->Phi[0]*f->P[0][11] + t->Phi[1]*f->P[1][11] + t->Phi[2]*f->P[2][11] +
-            t->Phi[3]*f->P[3][11] + t->Phi[4]*f->P[4][11] + t->Phi[5]*f->P[5][11] +
-            t->Phi[6]*f->P[6][11] + t->Phi[7]*f->P[8][11] + t->Phi[8]*f->P[9][11] +
-            t->Phi[9]*f->P[10][11] + t->Phi[10]*f->P[11][11] + t->Phi[11]*f->P[12][11] +
-            t->Phi[12]*f->P[13][11] + t->Phi[13]*f->P[14][11];
-    w->M[12] = t->Phi[0]*f->P[0][12] + t->Phi[1]*f->P[1][12] + t->Phi[2]*f->P[2][12] +
-            t->Phi[3]*f->P[3][12] + t->Phi[4]*f->P[4][12] + t->Phi[5]*f->P[5][12] +
-            t->Phi[6]*f->P[6][12] + t->Phi[7]*f->P[8][12] + t->Phi[8]*f->P[9][12] +
-            t->Phi[9]*f->P[10][12] + t->Phi[10]*f->P[11][12] + t->Phi[11]*f->P[12][12] +
-            t->Phi[12]*f->P[13][12] + t->Phi[13]*f->P[14][12];
-    w->M[13] = t->Phi[0]*f->P[0][13] + t->Phi[1]*f->P[1][13] + t->Phi[2]*f->P[2][13] +
-            t->Phi[3]*f->P[3][13] + t->Phi[4]*f->P[4][13] + t->Phi[5]*f->P[5][13] +
-            t->Phi[6]*f->P[6][13] + t->Phi[7]*f->P[8][13] + t->Phi[8]*f->P[9][13] +
-            t->Phi[9]*f->P[10][13] + t->Phi[10]*f->P[11][13] + t->Phi[11]*f->P[12][13] +
-            t->Phi[12]*f->P[13][13] + t->Phi[13]*f->P[14][13];
+    int c;
+    lane_pair b[14];
+    b[0] = lane_pair_of(t->Phi[0], t->Phi[0]);
+    b[1] = lane_pair_of(t->Phi[1], t->Phi[1]);
+    b[2] = lane_pair_of(t->Phi[2], t->Phi[2]);
+    b[3] = lane_pair_of(t->Phi[3], t->Phi[3]);
+    b[4] = lane_pair_of(t->Phi[4], t->Phi[4]);
+    b[5] = lane_pair_of(t->Phi[5], t->Phi[5]);
+    b[6] = lane_pair_of(t->Phi[6], t->Phi[6]);
+    b[7] = lane_pair_of(t->Phi[7], t->Phi[7]);
+    b[8] = lane_pair_of(t->Phi[8], t->Phi[8]);
+    b[9] = lane_pair_of(t->Phi[9], t->Phi[9]);
+    b[10] = lane_pair_of(t->Phi[10], t->Phi[10]);
+    b[11] = lane_pair_of(t->Phi[11], t->Phi[11]);
+    b[12] = lane_pair_of(t->Phi[12], t->Phi[12]);
+    b[13] = lane_pair_of(t->Phi[13], t->Phi[13]);
+    for (c = 0; c + 1 < 15; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[14] = t->Phi[0]*f->P[0][14] + t->Phi[1]*f->P[1][14] + t->Phi[2]*f->P[2][14] +
             t->Phi[3]*f->P[3][14] + t->Phi[4]*f->P[4][14] + t->Phi[5]*f->P[5][14] +
             t->Phi[6]*f->P[6][14] + t->Phi[7]*f->P[8][14] + t->Phi[8]*f->P[9][14] +
@@ -2737,76 +3084,39 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_0(const ins_gps15_transition *res
 INS_GPS15_BLOCK void phi_times_p_row_1(const ins_gps15_filter *restrict f, const
         ins_gps15_transition *restrict t, ins_gps15_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[14]*f->P[0][0] + t->Phi[15]*f->P[1][0] + t->Phi[16]*f->P[2][0] +
-            t->Phi[17]*f->P[3][0] + t->Phi[18]*f->P[4][0] + t->Phi[19]*f->P[5][0] +
-            t->Phi[20]*f->P[6][0] + t->Phi[21]*f->P[8][0] + t->Phi[22]*f->P[9][0] +
-            t->Phi[23]*f->P[10][0] + t->Phi[24]*f->P[11][0] + t->Phi[25]*f->P[12][0] +
-            t->Phi[26]*f->P[13][0] + t->Phi[27]*f->P[14][0];
-    w->M[1] = t->Phi[14]*f->P[0][1] + t->Phi[15]*f->P[1][1] + t->Phi[16]*f->P[2][1] +
-            t->Phi[17]*f->P[3][1] + t->Phi[18]*f->P[4][1] + t->Phi[19]*f->P[5][1] +
-            t->Phi[20]*f->P[6][1] + t->Phi[21]*f->P[8][1] + t->Phi[22]*f->P[9][1] +
-            t->Phi[23]*f->P[10][1] + t->Phi[24]*f->P[11][1] + t->Phi[25]*f->P[12][1] +
-            t->Phi[26]*f->P[13][1] + t->Phi[27]*f->P[14][1];
-    w->M[2] = t->Phi[14]*f->P[0][2] + t->Phi[15]*f->P[1][2] + t->Phi[16]*f->P[2][2] +
-            t->Phi[17]*f->P[3][2] + t->Phi[18]*f->P[4][2] + t->Phi[19]*f->P[5][2] +
-            t->Phi[20]*f->P[6][2] + t->Phi[21]*f->P[8][2] + t->Phi[22]*f->P[9][2] +
-            t->Phi[23]*f->P[10][2] + t->Phi[24]*f->P[11][2] + t->Phi[25]*f->P[12][2] +
-            t->Phi[26]*f->P[13][2] + t->Phi[27]*f->P[14][2];
-    w->M[3] = t->Phi[14]*f->P[0][3] + t->Phi[15]*f->P[1][3] + t->Phi[16]*f->P[2][3] +
-            t->Phi[17]*f->P[3][3] + t->Phi[18]*f->P[4][3] + t->Phi[19]*f->P[5][3] +
-            t->Phi[20]*f->P[6][3] + t->Phi[21]*f->P[8][3] + t->Phi[22]*f->P[9][3] +
-            t->Phi[23]*f->P[10][3] + t->Phi[24]*f->P[11][3] + t->Phi[25]*f->P[12][3] +
-            t->Phi[26]*f->P[13][3] + t->Phi[27]*f->P[14][3];
-    w->M[4] = t->Phi[14]*f->P[0][4] + t->Phi[15]*f->P[1][4] + t->Phi[16]*f->P[2][4] +
-            t->Phi[17]*f->P[3][4] + t->Phi[18]*f->P[4][4] + t->Phi[19]*f->P[5][4] +
-            t->Phi[20]*f->P[6][4] + t->Phi[21]*f->P[8][4] + t->Phi[22]*f->P[9][4] +
-            t->Phi[23]*f->P[10][4] + t->Phi[24]*f->P[11][4] + t->Phi[25]*f->P[12][4] +
-            t->Phi[26]*f->P[13][4] + t->Phi[27]*f->P[14][4];
-    w->M[5] = t->Phi[14]*f->P[0][5] + t->Phi[15]*f->P[1][5] + t->Phi[16]*f->P[2][5] +
-            t->Phi[17]*f->P[3][5] + t->Phi[18]*f->P[4][5] + t->Phi[19]*f->P[5][5] +
-            t->Phi[20]*f->P[6][5] + t->Phi[21]*f->P[8][5] + t->Phi[22]*f->P[9][5] +
-            t->Phi[23]*f->P[10][5] + t->Phi[24]*f->P[11][5] + t->Phi[25]*f->P[12][5] +
-            t->Phi[26]*f->P[13][5] + t->Phi[27]*f->P[14][5];
-    w->M[6] = t->Phi[14]*f->P[0][6] + t->Phi[15]*f->P[1][6] + t->Phi[16]*f->P[2][6] +
-            t->Phi[17]*f->P[3][6] + t->Phi[18]*f->P[4][6] + t->Phi[19]*f->P[5][6] +
-            t->Phi[20]*f->P[6][6] + t->Phi[21]*f->P[8][6] + t->Phi[22]*f->P[9][6] +
-            t->Phi[23]*f->P[10][6] + t->Phi[24]*f->P[11][6] + t->Phi[25]*f->P[12][6] +
-            t->Phi[26]*f->P[13][6] + t->Phi[27]*f->P[14][6];
-    w->M[7] = t->Phi[14]*f->P[0][7] + t->Phi[15]*f->P[1][7] + t->Phi[16]*f->P[2][7] +
-            t->Phi[17]*f->P[3][7] + t->Phi[18]*f->P[4][7] + t->Phi[19]*f->P[5][7] +
-            t->Phi[20]*f->P[6][7] + t->Phi[21]*f->P[8][7] + t->Phi[22]*f->P[9][7] +
-            t->Phi[23]*f->P[10][7] + t->Phi[24]*f->P[11][7] + t->Phi[25]*f->P[12][7] +
-            t->Phi[26]*f->P[13][7] + t->Phi[27]*f->P[14][7];
-    w->M[8] = t->Phi[14]*f->P[0][8] + t->Phi[15]*f->P[1][8] + t->Phi[16]*f->P[2][8] +
-            t->Phi[17]*f->P[3][8] + t->Phi[18]*f->P[4][8] + t->Phi[19]*f->P[5][8] +
-            t->Phi[20]*f->P[6][8] + t->Phi[21]*f->P[8][8] + t->Phi[22]*f->P[9][8] +
-            t->Phi[23]*f->P[10][8] + t->Phi[24]*f->P[11][8] + t->Phi[25]*f->P[12][8] +
-            t->Phi[26]*f->P[13][8] + t->Phi[27]*f->P[14][8];
-    w->M[9] = t->Phi[14]*f->P[0][9] + t->Phi[15]*f->P[1][9] + t->Phi[16]*f->P[2][9] +
-            t->Phi[17]*f->P[3][9] + t->Phi[18]*f->P[4][9] + t->Phi[19]*f->P[5][9] +
-            t->Phi[20]*f->P[6][9] + t->Phi[21]*f->P[8][9] + t->Phi[22]*f->P[9][9] +
-            t->Phi[23]*f->P[10][9] + t->Phi[24]*f->P[11][9] + t->Phi[25]*f->P[12][9] +
-            t->Phi[26]*f->P[13][9] + t->Phi[27]*f->P[14][9];
-    w->M[10] = t->Phi[14]*f->P[0][10] + t->Phi[15]*f->P[1][10] + t->Phi[16]*f->P[2][10] +
-            t->Phi[17]*f->P[3][10] + t->Phi[18]*f->P[4][10] + t->Phi[19]*f->P[5][10] +
-            t->Phi[20]*f->P[6][10] + t->Phi[21]*f->P[8][10] + t->Phi[22]*f->P[9][10] +
-            t->Phi[23]*f->P[10][10] + t->Phi[24]*f->P[11][10] + t->Phi[25]*f->P[12][10] +
-            t->Phi[26]*f->P[13][10] + t->Phi[27]*f->P[14][10];
-    w->M[11] = t->Phi[14]*f->P[0][11] + t->Phi[15]*f->P[1][11] + t->Phi[16]*f->P[2][11] +
-            t->Phi[17]*f->P[3][11] + t->Phi[18]*f->P[4][11] + t->Phi[19]*f->P[5][11] +
-            t->Phi[20]*f->P[6][11] + t->Phi[21]*f->P[8][11] + t->Phi[22]*f->P[9][11] +
-            t->Phi[23]*f->P[10][11] + t->Phi[24]*f->P[11][11] + t->Phi[25]*f->P[12][11] +
-            t->Phi[26]*f->P[13][11] + t->Phi[27]*f->P[14][11];
-    w->M[12] = t->Phi[14]*f->P[0][12] + t->Phi[15]*f->P[1][12] + t->Phi[16]*f->P[2][12] +
-            t->Phi[17]*f->P[3][12] + t->Phi[18]*f->P[4][12] + t->Phi[19]*f->P[5][12] +
-            t->Phi[20]*f->P[6][12] + t->Phi[21]*f->P[8][12] + t->Phi[22]*f->P[9][12] +
-            t->Phi[23]*f->P[10][12] + t->Phi[24]*f->P[11][12] + t->Phi[25]*f->P[12][12] +
-            t->Phi[26]*f->P[13][12] + t->Phi[27]*f->P[14][12];
-    w->M[13] = t->Phi[14]*f->P[0][13] + t->Phi[15]*f->P[1][13] + t->Phi[16]*f->P[2][13] +
-            t->Phi[17]*f->P[3][13] + t->Phi[18]*f->P[4][13] + t->Phi[19]*f->P[5][13] +
-            t->Phi[20]*f->P[6][13] + t->Phi[21]*f->P[8][13] + t->Phi[22]*f->P[9][13] +
-            t->Phi[23]*f->P[10][13] + t->Phi[24]*f->P[11][13] + t->Phi[25]*f->P[12][13] +
-            t->Phi[26]*f->P[13][13] + t->Phi[27]*f->P[14][13];
+    int c;
+    lane_pair b[14];
+    b[0] = lane_pair_of(t->Phi[14], t->Phi[14]);
+    b[1] = lane_pair_of(t->Phi[15], t->Phi[15]);
+    b[2] = lane_pair_of(t->Phi[16], t->Phi[16]);
+    b[3] = lane_pair_of(t->Phi[17], t->Phi[17]);
+    b[4] = lane_pair_of(t->Phi[18], t->Phi[18]);
+    b[5] = lane_pair_of(t->Phi[19], t->Phi[19]);
+    b[6] = lane_pair_of(t->Phi[20], t->Phi[20]);
+    b[7] = lane_pair_of(t->Phi[21], t->Phi[21]);
+    b[8] = lane_pair_of(t->Phi[22], t->Phi[22]);
+    b[9] = lane_pair_of(t->Phi[23], t->Phi[23]);
+    b[10] = lane_pair_of(t->Phi[24], t->Phi[24]);
+    b[11] = lane_pair_of(t->Phi[25], t->Phi[25]);
+    b[12] = lane_pair_of(t->Phi[26], t->Phi[26]);
+    b[13] = lane_pair_of(t->Phi[27], t->Phi[27]);
+    for (c = 0; c + 1 < 15; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[14] = t->Phi[14]*f->P[0][14] + t->Phi[15]*f->P[1][14] + t->Phi[16]*f->P[2][14] +
             t->Phi[17]*f->P[3][14] + t->Phi[18]*f->P[4][14] + t->Phi[19]*f->P[5][14] +
             t->Phi[20]*f->P[6][14] + t->Phi[21]*f->P[8][14] + t->Phi[22]*f->P[9][14] +
@@ -2897,76 +3207,39 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_1(const ins_gps15_transition *res
 INS_GPS15_BLOCK void phi_times_p_row_2(const ins_gps15_filter *restrict f, const
         ins_gps15_transition *restrict t, ins_gps15_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[28]*f->P[0][0] + t->Phi[29]*f->P[1][0] + t->Phi[30]*f->P[2][0] +
-            t->Phi[31]*f->P[3][0] + t->Phi[32]*f->P[4][0] + t->Phi[33]*f->P[5][0] +
-            t->Phi[34]*f->P[6][0] + t->Phi[35]*f->P[8][0] + t->Phi[36]*f->P[9][0] +
-            t->Phi[37]*f->P[10][0] + t->Phi[38]*f->P[11][0] + t->Phi[39]*f->P[12][0] +
-            t->Phi[40]*f->P[13][0] + t->Phi[41]*f->P[14][0];
-    w->M[1] = t->Phi[28]*f->P[0][1] + t->Phi[29]*f->P[1][1] + t->Phi[30]*f->P[2][1] +
-            t->Phi[31]*f->P[3][1] + t->Phi[32]*f->P[4][1] + t->Phi[33]*f->P[5][1] +
-            t->Phi[34]*f->P[6][1] + t->Phi[35]*f->P[8][1] + t->Phi[36]*f->P[9][1] +
-            t->Phi[37]*f->P[10][1] + t->Phi[38]*f->P[11][1] + t->Phi[39]*f->P[12][1] +
-            t->Phi[40]*f->P[13][1] + t->Phi[41]*f->P[14][1];
-    w->M[2] = t->Phi[28]*f->P[0][2] + t->Phi[29]*f->P[1][2] + t->Phi[30]*f->P[2][2] +
-            t->Phi[31]*f->P[3][2] + t->Phi[32]*f->P[4][2] + t->Phi[33]*f->P[5][2] +
-            t->Phi[34]*f->P[6][2] + t->Phi[35]*f->P[8][2] + t->Phi[36]*f->P[9][2] +
-            t->Phi[37]*f->P[10][2] + t->Phi[38]*f->P[11][2] + t->Phi[39]*f->P[12][2] +
-            t->Phi[40]*f->P[13][2] + t->Phi[41]*f->P[14][2];
-    w->M[3] = t->Phi[28]*f->P[0][3] + t->Phi[29]*f->P[1][3] + t->Phi[30]*f->P[2][3] +
-            t->Phi[31]*f->P[3][3] + t->Phi[32]*f->P[4][3] + t->Phi[33]*f->P[5][3] +
-            t->Phi[34]*f->P[6][3] + t->Phi[35]*f->P[8][3] + t->Phi[36]*f->P[9][3] +
-            t->Phi[37]*f->P[10][3] + t->Phi[38]*f->P[11][3] + t->Phi[39]*f->P[12][3] +
-            t->Phi[40]*f->P[13][3] + t->Phi[41]*f->P[14][3];
-    w->M[4] = t->Phi[28]*f->P[0][4] + t->Phi[29]*f->P[1][4] + t->Phi[30]*f->P[2][4] +
-            t->Phi[31]*f->P[3][4] + t->Phi[32]*f->P[4][4] + t->Phi[33]*f->P[5][4] +
-            t->Phi[34]*f->P[6][4] + t->Phi[35]*f->P[8][4] + t->Phi[36]*f->P[9][4] +
-            t->Phi[37]*f->P[10][4] + t->Phi[38]*f->P[11][4] + t->Phi[39]*f->P[12][4] +
-            t->Phi[40]*f->P[13][4] + t->Phi[41]*f->P[14][4];
-    w->M[5] = t->Phi[28]*f->P[0][5] + t->Phi[29]*f->P[1][5] + t->Phi[30]*f->P[2][5] +
-            t->Phi[31]*f->P[3][5] + t->Phi[32]*f->P[4][5] + t->Phi[33]*f->P[5][5] +
-            t->Phi[34]*f->P[6][5] + t->Phi[35]*f->P[8][5] + t->Phi[36]*f->P[9][5] +
-            t->Phi[37]*f->P[10][5] + t->Phi[38]*f->P[11][5] + t->Phi[39]*f->P[12][5] +
-            t->Phi[40]*f->P[13][5] + t->Phi[41]*f->P[14][5];
-    w->M[6] = t->Phi[28]*f->P[0][6] + t->Phi[29]*f->P[1][6] + t->Phi[30]*f->P[2][6] +
-            t->Phi[31]*f->P[3][6] + t->Phi[32]*f->P[4][6] + t->Phi[33]*f->P[5][6] +
-            t->Phi[34]*f->P[6][6] + t->Phi[35]*f->P[8][6] + t->Phi[36]*f->P[9][6] +
-            t->Phi[37]*f->P[10][6] + t->Phi[38]*f->P[11][6] + t->Phi[39]*f->P[12][6] +
-            t->Phi[40]*f->P[13][6] + t->Phi[41]*f->P[14][6];
-    w->M[7] = t->Phi[28]*f->P[0][7] + t->Phi[29]*f->P[1][7] + t->Phi[30]*f->P[2][7] +
-            t->Phi[31]*f->P[3][7] + t->Phi[32]*f->P[4][7] + t->Phi[33]*f->P[5][7] +
-            t->Phi[34]*f->P[6][7] + t->Phi[35]*f->P[8][7] + t->Phi[36]*f->P[9][7] +
-            t->Phi[37]*f->P[10][7] + t->Phi[38]*f->P[11][7] + t->Phi[39]*f->P[12][7] +
-            t->Phi[40]*f->P[13][7] + t->Phi[41]*f->P[14][7];
-    w->M[8] = t->Phi[28]*f->P[0][8] + t->Phi[29]*f->P[1][8] + t->Phi[30]*f->P[2][8] +
-            t->Phi[31]*f->P[3][8] + t->Phi[32]*f->P[4][8] + t->Phi[33]*f->P[5][8] +
-            t->Phi[34]*f->P[6][8] + t->Phi[35]*f->P[8][8] + t->Phi[36]*f->P[9][8] +
-            t->Phi[37]*f->P[10][8] + t->Phi[38]*f->P[11][8] + t->Phi[39]*f->P[12][8] +
-            t->Phi[40]*f->P[13][8] + t->Phi[41]*f->P[14][8];
-    w->M[9] = t->Phi[28]*f->P[0][9] + t->Phi[29]*f->P[1][9] + t->Phi[30]*f->P[2][9] +
-            t->Phi[31]*f->P[3][9] + t->Phi[32]*f->P[4][9] + t->Phi[33]*f->P[5][9] +
-            t->Phi[34]*f->P[6][9] + t->Phi[35]*f->P[8][9] + t->Phi[36]*f->P[9][9] +
-            t->Phi[37]*f->P[10][9] + t->Phi[38]*f->P[11][9] + t->Phi[39]*f->P[12][9] +
-            t->Phi[40]*f->P[13][9] + t->Phi[41]*f->P[14][9];
-    w->M[10] = t->Phi[28]*f->P[0][10] + t->Phi[29]*f->P[1][10] + t->Phi[30]*f->P[2][10] +
-            t->Phi[31]*f->P[3][10] + t->Phi[32]*f->P[4][10] + t->Phi[33]*f->P[5][10] +
-            t->Phi[34]*f->P[6][10] + t->Phi[35]*f->P[8][10] + t->Phi[36]*f->P[9][10] +
-            t->Phi[37]*f->P[10][10] + t->Phi[38]*f->P[11][10] + t->Phi[39]*f->P[12][10] +
-            t->Phi[40]*f->P[13][10] + t->Phi[41]*f->P[14][10];
-    w->M[11] = t->Phi[28]*f->P[0][11] + t->Phi[29]*f->P[1][11] + t->Phi[30]*f->P[2][11] +
-            t->Phi[31]*f->P[3][11] + t->Phi[32]*f->P[4][11] + t->Phi[33]*f->P[5][11] +
-            t->Phi[34]*f->P[6][11] + t->Phi[35]*f->P[8][11] + t->Phi[36]*f->P[9][11] +
-            t->Phi[37]*f->P[10][11] + t->Phi[38]*f->P[11][11] + t->Phi[39]*f->P[12][11] +
-            t->Phi[40]*f->P[13][11] + t->Phi[41]*f->P[14][11];
-    w->M[12] = t->Phi[28]*f->P[0][12] + t->Phi[29]*f->P[1][12] + t->Phi[30]*f->P[2][12] +
-            t->Phi[31]*f->P[3][12] + t->Phi[32]*f->P[4][12] + t->Phi[33]*f->P[5][12] +
-            t->Phi[34]*f->P[6][12] + t->Phi[35]*f->P[8][12] + t->Phi[36]*f->P[9][12] +
-            t->Phi[37]*f->P[10][12] + t->Phi[38]*f->P[11][12] + t->Phi[39]*f->P[12][12] +
-            t->Phi[40]*f->P[13][12] + t->Phi[41]*f->P[14][12];
-    w->M[13] = t->Phi[28]*f->P[0][13] + t->Phi[29]*f->P[1][13] + t->Phi[30]*f->P[2][13] +
-            t->Phi[31]*f->P[3][13] + t->Phi[32]*f->P[4][13] + t->Phi[33]*f->P[5][13] +
-            t->Phi[34]*f->P[6][13] + t->Phi[35]*f->P[8][13] + t->Phi[36]*f->P[9][13] +
-            t->Phi[37]*f->P[10][13] + t->Phi[38]*f->P[11][13] + t->Phi[39]*f->P[12][13] +
-            t->Phi[40]*f->P[13][13] + t->Phi[41]*f->P[14][13];
+    int c;
+    lane_pair b[14];
+    b[0] = lane_pair_of(t->Phi[28], t->Phi[28]);
+    b[1] = lane_pair_of(t->Phi[29], t->Phi[29]);
+    b[2] = lane_pair_of(t->Phi[30], t->Phi[30]);
+    b[3] = lane_pair_of(t->Phi[31], t->Phi[31]);
+    b[4] = lane_pair_of(t->Phi[32], t->Phi[32]);
+    b[5] = lane_pair_of(t->Phi[33], t->Phi[33]);
+    b[6] = lane_pair_of(t->Phi[34], t->Phi[34]);
+    b[7] = lane_pair_of(t->Phi[35], t->Phi[35]);
+    b[8] = lane_pair_of(t->Phi[36], t->Phi[36]);
+    b[9] = lane_pair_of(t->Phi[37], t->Phi[37]);
+    b[10] = lane_pair_of(t->Phi[38], t->Phi[38]);
+    b[11] = lane_pair_of(t->Phi[39], t->Phi[39]);
+    b[12] = lane_pair_of(t->Phi[40], t->Phi[40]);
+    b[13] = lane_pair_of(t->Phi[41], t->Phi[41]);
+    for (c = 0; c + 1 < 15; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[14] = t->Phi[28]*f->P[0][14] + t->Phi[29]*f->P[1][14] + t->Phi[30]*f->P[2][14] +
             t->Phi[31]*f->P[3][14] + t->Phi[32]*f->P[4][14] + t->Phi[33]*f->P[5][14] +
             t->Phi[34]*f->P[6][14] + t->Phi[35]*f->P[8][14] + t->Phi[36]*f->P[9][14] +
@@ -3049,76 +3322,39 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_2(const ins_gps15_transition *res
 INS_GPS15_BLOCK void phi_times_p_row_3(const ins_gps15_filter *restrict f, const
         ins_gps15_transition *restrict t, ins_gps15_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[42]*f->P[0][0] + t->Phi[43]*f->P[1][0] + t->Phi[44]*f->P[2][0] +
-            t->Phi[45]*f->P[3][0] + t->Phi[46]*f->P[4][0] + t->Phi[47]*f->P[5][0] +
-            t->Phi[48]*f->P[6][0] + t->Phi[49]*f->P[8][0] + t->Phi[50]*f->P[9][0] +
-            t->Phi[51]*f->P[10][0] + t->Phi[52]*f->P[11][0] + t->Phi[53]*f->P[12][0] +
-            t->Phi[54]*f->P[13][0] + t->Phi[55]*f->P[14][0];
-    w->M[1] = t->Phi[42]*f->P[0][1] + t->Phi[43]*f->P[1][1] + t->Phi[44]*f->P[2][1] +
-            t->Phi[45]*f->P[3][1] + t->Phi[46]*f->P[4][1] + t->Phi[47]*f->P[5][1] +
-            t->Phi[48]*f->P[6][1] + t->Phi[49]*f->P[8][1] + t->Phi[50]*f->P[9][1] +
-            t->Phi[51]*f->P[10][1] + t->Phi[52]*f->P[11][1] + t->Phi[53]*f->P[12][1] +
-            t->Phi[54]*f->P[13][1] + t->Phi[55]*f->P[14][1];
-    w->M[2] = t->Phi[42]*f->P[0][2] + t->Phi[43]*f->P[1][2] + t->Phi[44]*f->P[2][2] +
-            t->Phi[45]*f->P[3][2] + t->Phi[46]*f->P[4][2] + t->Phi[47]*f->P[5][2] +
-            t->Phi[48]*f->P[6][2] + t->Phi[49]*f->P[8][2] + t->Phi[50]*f->P[9][2] +
-            t->Phi[51]*f->P[10][2] + t->Phi[52]*f->P[11][2] + t->Phi[53]*f->P[12][2] +
-            t->Phi[54]*f->P[13][2] + t->Phi[55]*f->P[14][2];
-    w->M[3] = t->Phi[42]*f->P[0][3] + t->Phi[43]*f->P[1][3] + t->Phi[44]*f->P[2][3] +
-            t->Phi[45]*f->P[3][3] + t->Phi[46]*f->P[4][3] + t->Phi[47]*f->P[5][3] +
-            t->Phi[48]*f->P[6][3] + t->Phi[49]*f->P[8][3] + t->Phi[50]*f->P[9][3] +
-            t->Phi[51]*f->P[10][3] + t->Phi[52]*f->P[11][3] + t->Phi[53]*f->P[12][3] +
-            t->Phi[54]*f->P[13][3] + t->Phi[55]*f->P[14][3];
-    w->M[4] = t->Phi[42]*f->P[0][4] + t->Phi[43]*f->P[1][4] + t->Phi[44]*f->P[2][4] +
-            t->Phi[45]*f->P[3][4] + t->Phi[46]*f->P[4][4] + t->Phi[47]*f->P[5][4] +
-            t->Phi[48]*f->P[6][4] + t->Phi[49]*f->P[8][4] + t->Phi[50]*f->P[9][4] +
-            t->Phi[51]*f->P[10][4] + t->Phi[52]*f->P[11][4] + t->Phi[53]*f->P[12][4] +
-            t->Phi[54]*f->P[13][4] + t->Phi[55]*f->P[14][4];
-    w->M[5] = t->Phi[42]*f->P[0][5] + t->Phi[43]*f->P[1][5] + t->Phi[44]*f->P[2][5] +
-            t->Phi[45]*f->P[3][5] + t->Phi[46]*f->P[4][5] + t->Phi[47]*f->P[5][5] +
-            t->Phi[48]*f->P[6][5] + t->Phi[49]*f->P[8][5] + t->Phi[50]*f->P[9][5] +
-            t->Phi[51]*f->P[10][5] + t->Phi[52]*f->P[11][5] + t->Phi[53]*f->P[12][5] +
-            t->Phi[54]*f->P[13][5] + t->Phi[55]*f->P[14][5];
-    w->M[6] = t->Phi[42]*f->P[0][6] + t->Phi[43]*f->P[1][6] + t->Phi[44]*f->P[2][6] +
-            t->Phi[45]*f->P[3][6] + t->Phi[46]*f->P[4][6] + t->Phi[47]*f->P[5][6] +
-            t->Phi[48]*f->P[6][6] + t->Phi[49]*f->P[8][6] + t->Phi[50]*f->P[9][6] +
-            t->Phi[51]*f->P[10][6] + t->Phi[52]*f->P[11][6] + t->Phi[53]*f->P[12][6] +
-            t->Phi[54]*f->P[13][6] + t->Phi[55]*f->P[14][6];
-    w->M[7] = t->Phi[42]*f->P[0][7] + t->Phi[43]*f->P[1][7] + t->Phi[44]*f->P[2][7] +
-            t->Phi[45]*f->P[3][7] + t->Phi[46]*f->P[4][7] + t->Phi[47]*f->P[5][7] +
-            t->Phi[48]*f->P[6][7] + t->Phi[49]*f->P[8][7] + t->Phi[50]*f->P[9][7] +
-            t->Phi[51]*f->P[10][7] + t->Phi[52]*f->P[11][7] + t->Phi[53]*f->P[12][7] +
-            t->Phi[54]*f->P[13][7] + t->Phi[55]*f->P[14][7];
-    w->M[8] = t->Phi[42]*f->P[0][8] + t->Phi[43]*f->P[1][8] + t->Phi[44]*f->P[2][8] +
-            t->Phi[45]*f->P[3][8] + t->Phi[46]*f->P[4][8] + t->Phi[47]*f->P[5][8] +
-            t->Phi[48]*f->P[6][8] + t->Phi[49]*f->P[8][8] + t->Phi[50]*f->P[9][8] +
-            t->Phi[51]*f->P[10][8] + t->Phi[52]*f->P[11][8] + t->Phi[53]*f->P[12][8] +
-            t->Phi[54]*f->P[13][8] + t->Phi[55]*f->P[14][8];
-    w->M[9] = t->Phi[42]*f->P[0][9] + t->Phi[43]*f->P[1][9] + t->Phi[44]*f->P[2][9] +
-            t->Phi[45]*f->P[3][9] + t->Phi[46]*f->P[4][9] + t->Phi[47]*f->P[5][9] +
-            t->Phi[48]*f->P[6][9] + t->Phi[49]*f->P[8][9] + t->Phi[50]*f->P[9][9] +
-            t->Phi[51]*f->P[10][9] + t->Phi[52]*f->P[11][9] + t->Phi[53]*f->P[12][9] +
-            t->Phi[54]*f->P[13][9] + t->Phi[55]*f->P[14][9];
-    w->M[10] = t->Phi[42]*f->P[0][10] + t->Phi[43]*f->P[1][10] + t->Phi[44]*f->P[2][10] +
-            t->Phi[45]*f->P[3][10] + t->Phi[46]*f->P[4][10] + t->Phi[47]*f->P[5][10] +
-            t->Phi[48]*f->P[6][10] + t->Phi[49]*f->P[8][10] + t->Phi[50]*f->P[9][10] +
-            t->Phi[51]*f->P[10][10] + t->Phi[52]*f->P[11][10] + t->Phi[53]*f->P[12][10] +
-            t->Phi[54]*f->P[13][10] + t->Phi[55]*f->P[14][10];
-    w->M[11] = t->Phi[42]*f->P[0][11] + t->Phi[43]*f->P[1][11] + t->Phi[44]*f->P[2][11] +
-            t->Phi[45]*f->P[3][11] + t->Phi[46]*f->P[4][11] + t->Phi[47]*f->P[5][11] +
-            t->Phi[48]*f->P[6][11] + t->Phi[49]*f->P[8][11] + t->Phi[50]*f->P[9][11] +
-            t->Phi[51]*f->P[10][11] + t->Phi[52]*f->P[11][11] + t->Phi[53]*f->P[12][11] +
-            t->Phi[54]*f->P[13][11] + t->Phi[55]*f->P[14][11];
-    w->M[12] = t->Phi[42]*f->P[0][12] + t->Phi[43]*f->P[1][12] + t->Phi[44]*f->P[2][12] +
-            t->Phi[45]*f->P[3][12] + t->Phi[46]*f->P[4][12] + t->Phi[47]*f->P[5][12] +
-            t->Phi[48]*f->P[6][12] + t->Phi[49]*f->P[8][12] + t->Phi[50]*f->P[9][12] +
-            t->Phi[51]*f->P[10][12] + t->Phi[52]*f->P[11][12] + t->Phi[53]*f->P[12][12] +
-            t->Phi[54]*f->P[13][12] + t->Phi[55]*f->P[14][12];
-    w->M[13] = t->Phi[42]*f->P[0][13] + t->Phi[43]*f->P[1][13] + t->Phi[44]*f->P[2][13] +
-            t->Phi[45]*f->P[3][13] + t->Phi[46]*f->P[4][13] + t->Phi[47]*f->P[5][13] +
-            t->Phi[48]*f->P[6][13] + t->Phi[49]*f->P[8][13] + t->Phi[50]*f->P[9][13] +
-            t->Phi[51]*f->P[10][13] + t->Phi[52]*f->P[11][13] + t->Phi[53]*f->P[12][13] +
-            t->Phi[54]*f->P[13][13] + t->Phi[55]*f->P[14][13];
+    int c;
+    lane_pair b[14];
+    b[0] = lane_pair_of(t->Phi[42], t->Phi[42]);
+    b[1] = lane_pair_of(t->Phi[43], t->Phi[43]);
+    b[2] = lane_pair_of(t->Phi[44], t->Phi[44]);
+    b[3] = lane_pair_of(t->Phi[45], t->Phi[45]);
+    b[4] = lane_pair_of(t->Phi[46], t->Phi[46]);
+    b[5] = lane_pair_of(t->Phi[47], t->Phi[47]);
+    b[6] = lane_pair_of(t->Phi[48], t->Phi[48]);
+    b[7] = lane_pair_of(t->Phi[49], t->Phi[49]);
+    b[8] = lane_pair_of(t->Phi[50], t->Phi[50]);
+    b[9] = lane_pair_of(t->Phi[51], t->Phi[51]);
+    b[10] = lane_pair_of(t->Phi[52], t->Phi[52]);
+    b[11] = lane_pair_of(t->Phi[53], t->Phi[53]);
+    b[12] = lane_pair_of(t->Phi[54], t->Phi[54]);
+    b[13] = lane_pair_of(t->Phi[55], t->Phi[55]);
+    for (c = 0; c + 1 < 15; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[14] = t->Phi[42]*f->P[0][14] + t->Phi[43]*f->P[1][14] + t->Phi[44]*f->P[2][14] +
             t->Phi[45]*f->P[3][14] + t->Phi[46]*f->P[4][14] + t->Phi[47]*f->P[5][14] +
             t->Phi[48]*f->P[6][14] + t->Phi[49]*f->P[8][14] + t->Phi[50]*f->P[9][14] +
@@ -3193,76 +3429,39 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_3(const ins_gps15_transition *res
 INS_GPS15_BLOCK void phi_times_p_row_4(const ins_gps15_filter *restrict f, const
         ins_gps15_transition *restrict t, ins_gps15_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[56]*f->P[0][0] + t->Phi[57]*f->P[1][0] + t->Phi[58]*f->P[2][0] +
-            t->Phi[59]*f->P[3][0] + t->Phi[60]*f->P[4][0] + t->Phi[61]*f->P[5][0] +
-            t->Phi[62]*f->P[6][0] + t->Phi[63]*f->P[8][0] + t->Phi[64]*f->P[9][0] +
-            t->Phi[65]*f->P[10][0] + t->Phi[66]*f->P[11][0] + t->Phi[67]*f->P[12][0] +
-            t->Phi[68]*f->P[13][0] + t->Phi[69]*f->P[14][0];
-    w->M[1] = t->Phi[56]*f->P[0][1] + t->Phi[57]*f->P[1][1] + t->Phi[58]*f->P[2][1] +
-            t->Phi[59]*f->P[3][1] + t->Phi[60]*f->P[4][1] + t->Phi[61]*f->P[5][1] +
-            t->Phi[62]*f->P[6][1] + t->Phi[63]*f->P[8][1] + t->Phi[64]*f->P[9][1] +
-            t->Phi[65]*f->P[10][1] + t->Phi[66]*f->P[11][1] + t->Phi[67]*f->P[12][1] +
-            t->Phi[68]*f->P[13][1] + t->Phi[69]*f->P[14][1];
-    w->M[2] = t->Phi[56]*f->P[0][2] + t->Phi[57]*f->P[1][2] + t->Phi[58]*f->P[2][2] +
-            t->Phi[59]*f->P[3][2] + t->Phi[60]*f->P[4][2] + t->Phi[61]*f->P[5][2] +
-            t->Phi[62]*f->P[6][2] + t->Phi[63]*f->P[8][2] + t->Phi[64]*f->P[9][2] +
-            t->Phi[65]*f->P[10][2] + t->Phi[66]*f->P[11][2] + t->Phi[67]*f->P[12][2] +
-            t->Phi[68]*f->P[13][2] + t->Phi[69]*f->P[14][2];
-    w->M[3] = t->Phi[56]*f->P[0][3] + t->Phi[57]*f->P[1][3] + t->Phi[58]*f->P[2][3] +
-            t->Phi[59]*f->P[3][3] + t->Phi[60]*f->P[4][3] + t->Phi[61]*f->P[5][3] +
-            t->Phi[62]*f->P[6][3] + t->Phi[63]*f->P[8][3] + t->Phi[64]*f->P[9][3] +
-            t->Phi[65]*f->P[10][3] + t->Phi[66]*f->P[11][3] + t->Phi[67]*f->P[12][3] +
-            t->Phi[68]*f->P[13][3] + t->Phi[69]*f->P[14][3];
-    w->M[4] = t->Phi[56]*f->P[0][4] + t->Phi[57]*f->P[1][4] + t->Phi[58]*f->P[2][4] +
-            t->Phi[59]*f->P[3][4] + t->Phi[60]*f->P[4][4] + t->Phi[61]*f->P[5][4] +
-            t->Phi[62]*f->P[6][4] + t->Phi[63]*f->P[8][4] + t->Phi[64]*f->P[9][4] +
-            t->Phi[65]*f->P[10][4] + t->Phi[66]*f->P[11][4] + t->Phi[67]*f->P[12][4] +
-            t->Phi[68]*f->P[13][4] + t->Phi[69]*f->P[14][4];
-    w->M[5] = t->Phi[56]*f->P[0][5] + t->Phi[57]*f->P[1][5] + t->Phi[58]*f->P[2][5] +
-            t->Phi[59]*f->P[3][5] + t->Phi[60]*f->P[4][5] + t->Phi[61]*f->P[5][5] +
-            t->Phi[62]*f->P[6][5] + t->Phi[63]*f->P[8][5] + t->Phi[64]*f->P[9][5] +
-            t->Phi[65]*f->P[10][5] + t->Phi[66]*f->P[11][5] + t->Phi[67]*f->P[12][5] +
-            t->Phi[68]*f->P[13][5] + t->Phi[69]*f->P[14][5];
-    w->M[6] = t->Phi[56]*f->P[0][6] + t->Phi[57]*f->P[1][6] + t->Phi[58]*f->P[2][6] +
-            t->Phi[59]*f->P[3][6] + t->Phi[60]*f->P[4][6] + t->Phi[61]*f->P[5][6] +
-            t->Phi[62]*f->P[6][6] + t->Phi[63]*f->P[8][6] + t->Phi[64]*f->P[9][6] +
-            t->Phi[65]*f->P[10][6] + t->Phi[66]*f->P[11][6] + t->Phi[67]*f->P[12][6] +
-            t->Phi[68]*f->P[13][6] + t->Phi[69]*f->P[14][6];
-    w->M[7] = t->Phi[56]*f->P[0][7] + t->Phi[57]*f->P[1][7] + t->Phi[58]*f->P[2][7] +
-            t->Phi[59]*f->P[3][7] + t->Phi[60]*f->P[4][7] + t->Phi[61]*f->P[5][7] +
-            t->Phi[62]*f->P[6][7] + t->Phi[63]*f->P[8][7] + t->Phi[64]*f->P[9][7] +
-            t->Phi[65]*f->P[10][7] + t->Phi[66]*f->P[11][7] + t->Phi[67]*f->P[12][7] +
-            t->Phi[68]*f->P[13][7] + t->Phi[69]*f->P[14][7];
-    w->M[8] = t->Phi[56]*f->P[0][8] + t->Phi[57]*f->P[1][8] + t->Phi[58]*f->P[2][8] +
-            t->Phi[59]*f->P[3][8] + t->Phi[60]*f->P[4][8] + t->Phi[61]*f->P[5][8] +
-            t->Phi[62]*f->P[6][8] + t->Phi[63]*f->P[8][8] + t->Phi[64]*f->P[9][8] +
-            t->Phi[65]*f->P[10][8] + t->Phi[66]*f->P[11][8] + t->Phi[67]*f->P[12][8] +
-            t->Phi[68]*f->P[13][8] + t->Phi[69]*f->P[14][8];
-    w->M[9] = t->Phi[56]*f->P[0][9] + t->Phi[57]*f->P[1][9] + t->Phi[58]*f->P[2][9] +
-            t->Phi[59]*f->P[3][9] + t->Phi[60]*f->P[4][9] + t->Phi[61]*f->P[5][9] +
-            t->Phi[62]*f->P[6][9] + t->Phi[63]*f->P[8][9] + t->Phi[64]*f->P[9][9] +
-            t->Phi[65]*f->P[10][9] + t->Phi[66]*f->P[11][9] + t->Phi[67]*f->P[12][9] +
-            t->Phi[68]*f->P[13][9] + t->Phi[69]*f->P[14][9];
-    w->M[10] = t->Phi[56]*f->P[0][10] + t->Phi[57]*f->P[1][10] + t->Phi[58]*f->P[2][10] +
-            t->Phi[59]*f->P[3][10] + t->Phi[60]*f->P[4][10] + t->Phi[61]*f->P[5][10] +
-            t->Phi[62]*f->P[6][10] + t->Phi[63]*f->P[8][10] + t->Phi[64]*f->P[9][10] +
-            t->Phi[65]*f->P[10][10] + t->Phi[66]*f->P[11][10] + t->Phi[67]*f->P[12][10] +
-            t->Phi[68]*f->P[13][10] + t->Phi[69]*f->P[14][10];
-    w->M[11] = t->Phi[56]*f->P[0][11] + t->Phi[57]*f->P[1][11] + t->Phi[58]*f->P[2][11] +
-            t->Phi[59]*f->P[3][11] + t->Phi[60]*f->P[4][11] + t->Phi[61]*f->P[5][11] +
-            t->Phi[62]*f->P[6][11] + t->Phi[63]*f->P[8][11] + t->Phi[64]*f->P[9][11] +
-            t->Phi[65]*f->P[10][11] + t->Phi[66]*f->P[11][11] + t->Phi[67]*f->P[12][11] +
-            t->Phi[68]*f->P[13][11] + t->Phi[69]*f->P[14][11];
-    w->M[12] = t->Phi[56]*f->P[0][12] + t->Phi[57]*f->P[1][12] + t->Phi[58]*f->P[2][12] +
-            t->Phi[59]*f->P[3][12] + t->Phi[60]*f->P[4][12] + t->Phi[61]*f->P[5][12] +
-            t->Phi[62]*f->P[6][12] + t->Phi[63]*f->P[8][12] + t->Phi[64]*f->P[9][12] +
-            t->Phi[65]*f->P[10][12] + t->Phi[66]*f->P[11][12] + t->Phi[67]*f->P[12][12] +
-            t->Phi[68]*f->P[13][12] + t->Phi[69]*f->P[14][12];
-    w->M[13] = t->Phi[56]*f->P[0][13] + t->Phi[57]*f->P[1][13] + t->Phi[58]*f->P[2][13] +
-            t->Phi[59]*f->P[3][13] + t->Phi[60]*f->P[4][13] + t->Phi[61]*f->P[5][13] +
-            t->Phi[62]*f->P[6][13] + t->Phi[63]*f->P[8][13] + t->Phi[64]*f->P[9][13] +
-            t->Phi[65]*f->P[10][13] + t->Phi[66]*f->P[11][13] + t->Phi[67]*f->P[12][13] +
-            t->Phi[68]*f->P[13][13] + t->Phi[69]*f->P[14][13];
+    int c;
+    lane_pair b[14];
+    b[0] = lane_pair_of(t->Phi[56], t->Phi[56]);
+    b[1] = lane_pair_of(t->Phi[57], t->Phi[57]);
+    b[2] = lane_pair_of(t->Phi[58], t->Phi[58]);
+    b[3] = lane_pair_of(t->Phi[59], t->Phi[59]);
+    b[4] = lane_pair_of(t->Phi[60], t->Phi[60]);
+    b[5] = lane_pair_of(t->Phi[61], t->Phi[61]);
+    b[6] = lane_pair_of(t->Phi[62], t->Phi[62]);
+    b[7] = lane_pair_of(t->Phi[63], t->Phi[63]);
+    b[8] = lane_pair_of(t->Phi[64], t->Phi[64]);
+    b[9] = lane_pair_of(t->Phi[65], t->Phi[65]);
+    b[10] = lane_pair_of(t->Phi[66], t->Phi[66]);
+    b[11] = lane_pair_of(t->Phi[67], t->Phi[67]);
+    b[12] = lane_pair_of(t->Phi[68], t->Phi[68]);
+    b[13] = lane_pair_of(t->Phi[69], t->Phi[69]);
+    for (c = 0; c + 1 < 15; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[14] = t->Phi[56]*f->P[0][14] + t->Phi[57]*f->P[1][14] + t->Phi[58]*f->P[2][14] +
             t->Phi[59]*f->P[3][14] + t->Phi[60]*f->P[4][14] + t->Phi[61]*f->P[5][14] +
             t->Phi[62]*f->P[6][14] + t->Phi[63]*f->P[8][14] + t->Phi[64]*f->P[9][14] +
@@ -3329,76 +3528,39 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_4(const ins_gps15_transition *res
 INS_GPS15_BLOCK void phi_times_p_row_5(const ins_gps15_filter *restrict f, const
         ins_gps15_transition *restrict t, ins_gps15_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[70]*f->P[0][0] + t->Phi[71]*f->P[1][0] + t->Phi[72]*f->P[2][0] +
-            t->Phi[73]*f->P[3][0] + t->Phi[74]*f->P[4][0] + t->Phi[75]*f->P[5][0] +
-            t->Phi[76]*f->P[6][0] + t->Phi[77]*f->P[8][0] + t->Phi[78]*f->P[9][0] +
-            t->Phi[79]*f->P[10][0] + t->Phi[80]*f->P[11][0] + t->Phi[81]*f->P[12][0] +
-            t->Phi[82]*f->P[13][0] + t->Phi[83]*f->P[14][0];
-    w->M[1] = t->Phi[70]*f->P[0][1] + t->Phi[71]*f->P[1][1] + t->Phi[72]*f->P[2][1] +
-            t->Phi[73]*f->P[3][1] + t->Phi[74]*f->P[4][1] + t->Phi[75]*f->P[5][1] +
-            t->Phi[76]*f->P[6][1] + t->Phi[77]*f->P[8][1] + t->Phi[78]*f->P[9][1] +
-            t->Phi[79]*f->P[10][1] + t->Phi[80]*f->P[11][1] + t->Phi[81]*f->P[12][1] +
-            t->Phi[82]*f->P[13][1] + t->Phi[83]*f->P[14][1];
-    w->M[2] = t->Phi[70]*f->P[0][2] + t->Phi[71]*f->P[1][2] + t->Phi[72]*f->P[2][2] +
-            t->Phi[73]*f->P[3][2] + t->Phi[74]*f->P[4][2] + t->Phi[75]*f->P[5][2] +
-            t->Phi[76]*f->P[6][2] + t->Phi[77]*f->P[8][2] + t->Phi[78]*f->P[9][2] +
-            t->Phi[79]*f->P[10][2] + t->Phi[80]*f->P[11][2] + t->Phi[81]*f->P[12][2] +
-            t->Phi[82]*f->P[13][2] + t->Phi[83]*f->P[14][2];
-    w->M[3] = t->Phi[70]*f->P[0][3] + t->Phi[71]*f->P[1][3] + t->Phi[72]*f->P[2][3] +
-            t->Phi[73]*f->P[3][3] + t->Phi[74]*f->P[4][3] + t->Phi[75]*f->P[5][3] +
-            t->Phi[76]*f->P[6][3] + t->Phi[77]*f->P[8][3] + t->Phi[78]*f->P[9][3] +
-            t->Phi[79]*f->P[10][3] + t->Phi[80]*f->P[11][3] + t->Phi[81]*f->P[12][3] +
-            t->Phi[82]*f->P[13][3] + t->Phi[83]*f->P[14][3];
-    w->M[4] = t->Phi[70]*f->P[0][4] + t->Phi[71]*f->P[1][4] + t->Phi[72]*f->P[2][4] +
-            t->Phi[73]*f->P[3][4] + t->Phi[74]*f->P[4][4] + t->Phi[75]*f->P[5][4] +
-            t->Phi[76]*f->P[6][4] + t->Phi[77]*f->P[8][4] + t->Phi[78]*f->P[9][4] +
-            t->Phi[79]*f->P[10][4] + t->Phi[80]*f->P[11][4] + t->Phi[81]*f->P[12][4] +
-            t->Phi[82]*f->P[13][4] + t->Phi[83]*f->P[14][4];
-    w->M[5] = t->Phi[70]*f->P[0][5] + t->Phi[71]*f->P[1][5] + t->Phi[72]*f->P[2][5] +
-            t->Phi[73]*f->P[3][5] + t->Phi[74]*f->P[4][5] + t->Phi[75]*f->P[5][5] +
-            t->Phi[76]*f->P[6][5] + t->Phi[77]*f->P[8][5] + t->Phi[78]*f->P[9][5] +
-            t->Phi[79]*f->P[10][5] + t->Phi[80]*f->P[11][5] + t->Phi[81]*f->P[12][5] +
-            t->Phi[82]*f->P[13][5] + t->Phi[83]*f->P[14][5];
-    w->M[6] = t->Phi[70]*f->P[0][6] + t->Phi[71]*f->P[1][6] + t->Phi[72]*f->P[2][6] +
-            t->Phi[73]*f->P[3][6] + t->Phi[74]*f->P[4][6] + t->Phi[75]*f->P[5][6] +
-            t->Phi[76]*f->P[6][6] + t->Phi[77]*f->P[8][6] + t->Phi[78]*f->P[9][6] +
-            t->Phi[79]*f->P[10][6] + t->Phi[80]*f->P[11][6] + t->Phi[81]*f->P[12][6] +
-            t->Phi[82]*f->P[13][6] + t->Phi[83]*f->P[14][6];
-    w->M[7] = t->Phi[70]*f->P[0][7] + t->Phi[71]*f->P[1][7] + t->Phi[72]*f->P[2][7] +
-            t->Phi[73]*f->P[3][7] + t->Phi[74]*f->P[4][7] + t->Phi[75]*f->P[5][7] +
-            t->Phi[76]*f->P[6][7] + t->Phi[77]*f->P[8][7] + t->Phi[78]*f->P[9][7] +
-            t->Phi[79]*f->P[10][7] + t->Phi[80]*f->P[11][7] + t->Phi[81]*f->P[12][7] +
-            t->Phi[82]*f->P[13][7] + t->Phi[83]*f->P[14][7];
-    w->M[8] = t->Phi[70]*f->P[0][8] + t->Phi[71]*f->P[1][8] + t->Phi[72]*f->P[2][8] +
-            t->Phi[73]*f->P[3][8] + t->Phi[74]*f->P[4][8] + t->Phi[75]*f->P[5][8] +
-            t->Phi[76]*f->P[6][8] + t->Phi[77]*f->P[8][8] + t->Phi[78]*f->P[9][8] +
-            t->Phi[79]*f->P[10][8] + t->Phi[80]*f->P[11][8] + t->Phi[81]*f->P[12][8] +
-            t->Phi[82]*f->P[13][8] + t->Phi[83]*f->P[14][8];
-    w->M[9] = t->Phi[70]*f->P[0][9] + t->Phi[71]*f->P[1][9] + t->Phi[72]*f->P[2][9] +
-            t->Phi[73]*f->P[3][9] + t->Phi[74]*f->P[4][9] + t->Phi[75]*f->P[5][9] +
-            t->Phi[76]*f->P[6][9] + t->Phi[77]*f->P[8][9] + t->Phi[78]*f->P[9][9] +
-            t->Phi[79]*f->P[10][9] + t->Phi[80]*f->P[11][9] + t->Phi[81]*f->P[12][9] +
-            t->Phi[82]*f->P[13][9] + t->Phi[83]*f->P[14][9];
-    w->M[10] = t->Phi[70]*f->P[0][10] + t->Phi[71]*f->P[1][10] + t->Phi[72]*f->P[2][10] +
-            t->Phi[73]*f->P[3][10] + t->Phi[74]*f->P[4][10] + t->Phi[75]*f->P[5][10] +
-            t->Phi[76]*f->P[6][10] + t->Phi[77]*f->P[8][10] + t->Phi[78]*f->P[9][10] +
-            t->Phi[79]*f->P[10][10] + t->Phi[80]*f->P[11][10] + t->Phi[81]*f->P[12][10] +
-            t->Phi[82]*f->P[13][10] + t->Phi[83]*f->P[14][10];
-    w->M[11] = t->Phi[70]*f->P[0][11] + t->Phi[71]*f->P[1][11] + t->Phi[72]*f->P[2][11] +
-            t->Phi[73]*f->P[3][11] + t->Phi[74]*f->P[4][11] + t->Phi[75]*f->P[5][11] +
-            t->Phi[76]*f->P[6][11] + t->Phi[77]*f->P[8][11] + t->Phi[78]*f->P[9][11] +
-            t->Phi[79]*f->P[10][11] + t->Phi[80]*f->P[11][11] + t->Phi[81]*f->P[12][11] +
-            t->Phi[82]*f->P[13][11] + t->Phi[83]*f->P[14][11];
-    w->M[12] = t->Phi[70]*f->P[0][12] + t->Phi[71]*f->P[1][12] + t->Phi[72]*f->P[2][12] +
-            t->Phi[73]*f->P[3][12] + t->Phi[74]*f->P[4][12] + t->Phi[75]*f->P[5][12] +
-            t->Phi[76]*f->P[6][12] + t->Phi[77]*f->P[8][12] + t->Phi[78]*f->P[9][12] +
-            t->Phi[79]*f->P[10][12] + t->Phi[80]*f->P[11][12] + t->Phi[81]*f->P[12][12] +
-            t->Phi[82]*f->P[13][12] + t->Phi[83]*f->P[14][12];
-    w->M[13] = t->Phi[70]*f->P[0][13] + t->Phi[71]*f->P[1][13] + t->Phi[72]*f->P[2][13] +
-            t->Phi[73]*f->P[3][13] + t->Phi[74]*f->P[4][13] + t->Phi[75]*f->P[5][13] +
-            t->Phi[76]*f->P[6][13] + t->Phi[77]*f->P[8][13] + t->Phi[78]*f->P[9][13] +
-            t->Phi[79]*f->P[10][13] + t->Phi[80]*f->P[11][13] + t->Phi[81]*f->P[12][13] +
-            t->Phi[82]*f->P[13][13] + t->Phi[83]*f->P[14][13];
+    int c;
+    lane_pair b[14];
+    b[0] = lane_pair_of(t->Phi[70], t->Phi[70]);
+    b[1] = lane_pair_of(t->Phi[71], t->Phi[71]);
+    b[2] = lane_pair_of(t->Phi[72], t->Phi[72]);
+    b[3] = lane_pair_of(t->Phi[73], t->Phi[73]);
+    b[4] = lane_pair_of(t->Phi[74], t->Phi[74]);
+    b[5] = lane_pair_of(t->Phi[75], t->Phi[75]);
+    b[6] = lane_pair_of(t->Phi[76], t->Phi[76]);
+    b[7] = lane_pair_of(t->Phi[77], t->Phi[77]);
+    b[8] = lane_pair_of(t->Phi[78], t->Phi[78]);
+    b[9] = lane_pair_of(t->Phi[79], t->Phi[79]);
+    b[10] = lane_pair_of(t->Phi[80], t->Phi[80]);
+    b[11] = lane_pair_of(t->Phi[81], t->Phi[81]);
+    b[12] = lane_pair_of(t->Phi[82], t->Phi[82]);
+    b[13] = lane_pair_of(t->Phi[83], t->Phi[83]);
+    for (c = 0; c + 1 < 15; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[14] = t->Phi[70]*f->P[0][14] + t->Phi[71]*f->P[1][14] + t->Phi[72]*f->P[2][14] +
             t->Phi[73]*f->P[3][14] + t->Phi[74]*f->P[4][14] + t->Phi[75]*f->P[5][14] +
             t->Phi[76]*f->P[6][14] + t->Phi[77]*f->P[8][14] + t->Phi[78]*f->P[9][14] +
@@ -3457,76 +3619,39 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_5(const ins_gps15_transition *res
 INS_GPS15_BLOCK void phi_times_p_row_6(const ins_gps15_filter *restrict f, const
         ins_gps15_transition *restrict t, ins_gps15_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[84]*f->P[0][0] + t->Phi[85]*f->P[1][0] + t->Phi[86]*f->P[2][0] +
-            t->Phi[87]*f->P[3][0] + t->Phi[88]*f->P[4][0] + t->Phi[89]*f->P[5][0] +
-            t->Phi[90]*f->P[6][0] + t->Phi[91]*f->P[8][0] + t->Phi[92]*f->P[9][0] +
-            t->Phi[93]*f->P[10][0] + t->Phi[94]*f->P[11][0] + t->Phi[95]*f->P[12][0] +
-            t->Phi[96]*f->P[13][0] + t->Phi[97]*f->P[14][0];
-    w->M[1] = t->Phi[84]*f->P[0][1] + t->Phi[85]*f->P[1][1] + t->Phi[86]*f->P[2][1] +
-            t->Phi[87]*f->P[3][1] + t->Phi[88]*f->P[4][1] + t->Phi[89]*f->P[5][1] +
-            t->Phi[90]*f->P[6][1] + t->Phi[91]*f->P[8][1] + t->Phi[92]*f->P[9][1] +
-            t->Phi[93]*f->P[10][1] + t->Phi[94]*f->P[11][1] + t->Phi[95]*f->P[12][1] +
-            t->Phi[96]*f->P[13][1] + t->Phi[97]*f->P[14][1];
-    w->M[2] = t->Phi[84]*f->P[0][2] + t->Phi[85]*f->P[1][2] + t->Phi[86]*f->P[2][2] +
-            t->Phi[87]*f->P[3][2] + t->Phi[88]*f->P[4][2] + t->Phi[89]*f->P[5][2] +
-            t->Phi[90]*f->P[6][2] + t->Phi[91]*f->P[8][2] + t->Phi[92]*f->P[9][2] +
-            t->Phi[93]*f->P[10][2] + t->Phi[94]*f->P[11][2] + t->Phi[95]*f->P[12][2] +
-            t->Phi[96]*f->P[13][2] + t->Phi[97]*f->P[14][2];
-    w->M[3] = t->Phi[84]*f->P[0][3] + t->Phi[85]*f->P[1][3] + t->Phi[86]*f->P[2][3] +
-            t->Phi[87]*f->P[3][3] + t->Phi[88]*f->P[4][3] + t->Phi[89]*f->P[5][3] +
-            t->Phi[90]*f->P[6][3] + t->Phi[91]*f->P[8][3] + t->Phi[92]*f->P[9][3] +
-            t->Phi[93]*f->P[10][3] + t->Phi[94]*f->P[11][3] + t->Phi[95]*f->P[12][3] +
-            t->Phi[96]*f->P[13][3] + t->Phi[97]*f->P[14][3];
-    w->M[4] = t->Phi[84]*f->P[0][4] + t->Phi[85]*f->P[1][4] + t->Phi[86]*f->P[2][4] +
-            t->Phi[87]*f->P[3][4] + t->Phi[88]*f->P[4][4] + t->Phi[89]*f->P[5][4] +
-            t->Phi[90]*f->P[6][4] + t->Phi[91]*f->P[8][4] + t->Phi[92]*f->P[9][4] +
-            t->Phi[93]*f->P[10][4] + t->Phi[94]*f->P[11][4] + t->Phi[95]*f->P[12][4] +
-            t->Phi[96]*f->P[13][4] + t->Phi[97]*f->P[14][4];
-    w->M[5] = t->Phi[84]*f->P[0][5] + t->Phi[85]*f->P[1][5] + t->Phi[86]*f->P[2][5] +
-            t->Phi[87]*f->P[3][5] + t->Phi[88]*f->P[4][5] + t->Phi[89]*f->P[5][5] +
-            t->Phi[90]*f->P[6][5] + t->Phi[91]*f->P[8][5] + t->Phi[92]*f->P[9][5] +
-            t->Phi[93]*f->P[10][5] + t->Phi[94]*f->P[11][5] + t->Phi[95]*f->P[12][5] +
-            t->Phi[96]*f->P[13][5] + t->Phi[97]*f->P[14][5];
-    w->M[6] = t->Phi[84]*f->P[0][6] + t->Phi[85]*f->P[1][6] + t->Phi[86]*f->P[2][6] +
-            t->Phi[87]*f->P[3][6] + t->Phi[88]*f->P[4][6] + t->Phi[89]*f->P[5][6] +
-            t->Phi[90]*f->P[6][6] + t->Phi[91]*f->P[8][6] + t->Phi[92]*f->P[9][6] +
-            t->Phi[93]*f->P[10][6] + t->Phi[94]*f->P[11][6] + t->Phi[95]*f->P[12][6] +
-            t->Phi[96]*f->P[13][6] + t->Phi[97]*f->P[14][6];
-    w->M[7] = t->Phi[84]*f->P[0][7] + t->Phi[85]*f->P[1][7] + t->Phi[86]*f->P[2][7] +
-            t->Phi[87]*f->P[3][7] + t->Phi[88]*f->P[4][7] + t->Phi[89]*f->P[5][7] +
-            t->Phi[90]*f->P[6][7] + t->Phi[91]*f->P[8][7] + t->Phi[92]*f->P[9][7] +
-            t->Phi[93]*f->P[10][7] + t->Phi[94]*f->P[11][7] + t->Phi[95]*f->P[12][7] +
-            t->Phi[96]*f->P[13][7] + t->Phi[97]*f->P[14][7];
-    w->M[8] = t->Phi[84]*f->P[0][8] + t->Phi[85]*f->P[1][8] + t->Phi[86]*f->P[2][8] +
-            t->Phi[87]*f->P[3][8] + t->Phi[88]*f->P[4][8] + t->Phi[89]*f->P[5][8] +
-            t->Phi[90]*f->P[6][8] + t->Phi[91]*f->P[8][8] + t->Phi[92]*f->P[9][8] +
-            t->Phi[93]*f->P[10][8] + t->Phi[94]*f->P[11][8] + t->Phi[95]*f->P[12][8] +
-            t->Phi[96]*f->P[13][8] + t->Phi[97]*f->P[14][8];
-    w->M[9] = t->Phi[84]*f->P[0][9] + t->Phi[85]*f->P[1][9] + t->Phi[86]*f->P[2][9] +
-            t->Phi[87]*f->P[3][9] + t->Phi[88]*f->P[4][9] + t->Phi[89]*f->P[5][9] +
-            t->Phi[90]*f->P[6][9] + t->Phi[91]*f->P[8][9] + t->Phi[92]*f->P[9][9] +
-            t->Phi[93]*f->P[10][9] + t->Phi[94]*f->P[11][9] + t->Phi[95]*f->P[12][9] +
-            t->Phi[96]*f->P[13][9] + t->Phi[97]*f->P[14][9];
-    w->M[10] = t->Phi[84]*f->P[0][10] + t->Phi[85]*f->P[1][10] + t->Phi[86]*f->P[2][10] +
-            t->Phi[87]*f->P[3][10] + t->Phi[88]*f->P[4][10] + t->Phi[89]*f->P[5][10] +
-            t->Phi[90]*f->P[6][10] + t->Phi[91]*f->P[8][10] + t->Phi[92]*f->P[9][10] +
-            t->Phi[93]*f->P[10][10] + t->Phi[94]*f->P[11][10] + t->Phi[95]*f->P[12][10] +
-            t->Phi[96]*f->P[13][10] + t->Phi[97]*f->P[14][10];
-    w->M[11] = t->Phi[84]*f->P[0][11] + t->Phi[85]*f->P[1][11] + t->Phi[86]*f->P[2][11] +
-            t->Phi[87]*f->P[3][11] + t->Phi[88]*f->P[4][11] + t->Phi[89]*f->P[5][11] +
-            t->Phi[90]*f->P[6][11] + t->Phi[91]*f->P[8][11] + t->Phi[92]*f->P[9][11] +
-            t->Phi[93]*f->P[10][11] + t->Phi[94]*f->P[11][11] + t->Phi[95]*f->P[12][11] +
-            t->Phi[96]*f->P[13][11] + t->Phi[97]*f->P[14][11];
-    w->M[12] = t->Phi[84]*f->P[0][12] + t->Phi[85]*f->P[1][12] + t->Phi[86]*f->P[2][12] +
-            t->Phi[87]*f->P[3][12] + t->Phi[88]*f->P[4][12] + t->Phi[89]*f->P[5][12] +
-            t->Phi[90]*f->P[6][12] + t->Phi[91]*f->P[8][12] + t->Phi[92]*f->P[9][12] +
-            t->Phi[93]*f->P[10][12] + t->Phi[94]*f->P[11][12] + t->Phi[95]*f->P[12][12] +
-            t->Phi[96]*f->P[13][12] + t->Phi[97]*f->P[14][12];
-    w->M[13] = t->Phi[84]*f->P[0][13] + t->Phi[85]*f->P[1][13] + t->Phi[86]*f->P[2][13] +
-            t->Phi[87]*f->P[3][13] + t->Phi[88]*f->P[4][13] + t->Phi[89]*f->P[5][13] +
-            t->Phi[90]*f->P[6][13] + t->Phi[91]*f->P[8][13] + t->Phi[92]*f->P[9][13] +
-            t->Phi[93]*f->P[10][13] + t->Phi[94]*f->P[11][13] + t->Phi[95]*f->P[12][13] +
-            t->Phi[96]*f->P[13][13] + t->Phi[97]*f->P[14][13];
+    int c;
+    lane_pair b[14];
+    b[0] = lane_pair_of(t->Phi[84], t->Phi[84]);
+    b[1] = lane_pair_of(t->Phi[85], t->Phi[85]);
+    b[2] = lane_pair_of(t->Phi[86], t->Phi[86]);
+    b[3] = lane_pair_of(t->Phi[87], t->Phi[87]);
+    b[4] = lane_pair_of(t->Phi[88], t->Phi[88]);
+    b[5] = lane_pair_of(t->Phi[89], t->Phi[89]);
+    b[6] = lane_pair_of(t->Phi[90], t->Phi[90]);
+    b[7] = lane_pair_of(t->Phi[91], t->Phi[91]);
+    b[8] = lane_pair_of(t->Phi[92], t->Phi[92]);
+    b[9] = lane_pair_of(t->Phi[93], t->Phi[93]);
+    b[10] = lane_pair_of(t->Phi[94], t->Phi[94]);
+    b[11] = lane_pair_of(t->Phi[95], t->Phi[95]);
+    b[12] = lane_pair_of(t->Phi[96], t->Phi[96]);
+    b[13] = lane_pair_of(t->Phi[97], t->Phi[97]);
+    for (c = 0; c + 1 < 15; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[14] = t->Phi[84]*f->P[0][14] + t->Phi[85]*f->P[1][14] + t->Phi[86]*f->P[2][14] +
             t->Phi[87]*f->P[3][14] + t->Phi[88]*f->P[4][14] + t->Phi[89]*f->P[5][14] +
             t->Phi[90]*f->P[6][14] + t->Phi[91]*f->P[8][14] + t->Phi[92]*f->P[9][14] +
@@ -3577,76 +3702,41 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_6(const ins_gps15_transition *res
 INS_GPS15_BLOCK void phi_times_p_row_7(const ins_gps15_filter *restrict f, const
         ins_gps15_transition *restrict t, ins_gps15_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[98]*f->P[0][0] + t->Phi[99]*f->P[1][0] + t->Phi[100]*f->P[2][0] +
-            t->Phi[101]*f->P[3][0] + t->Phi[102]*f->P[4][0] + t->Phi[103]*f->P[5][0] +
-            t->Phi[104]*f->P[6][0] + t->Phi[105]*f->P[7][0] + t->Phi[106]*f->P[8][0] +
-            t->Phi[107]*f->P[9][0] + t->Phi[108]*f->P[10][0] + t->Phi[109]*f->P[11][0] +
-            t->Phi[110]*f->P[12][0] + t->Phi[111]*f->P[13][0] + t->Phi[112]*f->P[14][0];
-    w->M[1] = t->Phi[98]*f->P[0][1] + t->Phi[99]*f->P[1][1] + t->Phi[100]*f->P[2][1] +
-            t->Phi[101]*f->P[3][1] + t->Phi[102]*f->P[4][1] + t->Phi[103]*f->P[5][1] +
-            t->Phi[104]*f->P[6][1] + t->Phi[105]*f->P[7][1] + t->Phi[106]*f->P[8][1] +
-            t->Phi[107]*f->P[9][1] + t->Phi[108]*f->P[10][1] + t->Phi[109]*f->P[11][1] +
-            t->Phi[110]*f->P[12][1] + t->Phi[111]*f->P[13][1] + t->Phi[112]*f->P[14][1];
-    w->M[2] = t->Phi[98]*f->P[0][2] + t->Phi[99]*f->P[1][2] + t->Phi[100]*f->P[2][2] +
-            t->Phi[101]*f->P[3][2] + t->Phi[102]*f->P[4][2] + t->Phi[103]*f->P[5][2] +
-            t->Phi[104]*f->P[6][2] + t->Phi[105]*f->P[7][2] + t->Phi[106]*f->P[8][2] +
-            t->Phi[107]*f->P[9][2] + t->Phi[108]*f->P[10][2] + t->Phi[109]*f->P[11][2] +
-            t->Phi[110]*f->P[12][2] + t->Phi[111]*f->P[13][2] + t->Phi[112]*f->P[14][2];
-    w->M[3] = t->Phi[98]*f->P[0][3] + t->Phi[99]*f->P[1][3] + t->Phi[100]*f->P[2][3] +
-            t->Phi[101]*f->P[3][3] + t->Phi[102]*f->P[4][3] + t->Phi[103]*f->P[5][3] +
-            t->Phi[104]*f->P[6][3] + t->Phi[105]*f->P[7][3] + t->Phi[106]*f->P[8][3] +
-            t->Phi[107]*f->P[9][3] + t->Phi[108]*f->P[10][3] + t->Phi[109]*f->P[11][3] +
-            t->Phi[110]*f->P[12][3] + t->Phi[111]*f->P[13][3] + t->Phi[112]*f->P[14][3];
-    w->M[4] = t->Phi[98]*f->P[0][4] + t->Phi[99]*f->P[1][4] + t->Phi[100]*f->P[2][4] +
-            t->Phi[101]*f->P[3][4] + t->Phi[102]*f->P[4][4] + t->Phi[103]*f->P[5][4] +
-            t->Phi[104]*f->P[6][4] + t->Phi[105]*f->P[7][4] + t->Phi[106]*f->P[8][4] +
-            t->Phi[107]*f->P[9][4] + t->Phi[108]*f->P[10][4] + t->Phi[109]*f->P[11][4] +
-            t->Phi[110]*f->P[12][4] + t->Phi[111]*f->P[13][4] + t->Phi[112]*f->P[14][4];
-    w->M[5] = t->Phi[98]*f->P[0][5] + t->Phi[99]*f->P[1][5] + t->Phi[100]*f->P[2][5] +
-            t->Phi[101]*f->P[3][5] + t->Phi[102]*f->P[4][5] + t->Phi[103]*f->P[5][5] +
-            t->Phi[104]*f->P[6][5] + t->Phi[105]*f->P[7][5] + t->Phi[106]*f->P[8][5] +
-            t->Phi[107]*f->P[9][5] + t->Phi[108]*f->P[10][5] + t->Phi[109]*f->P[11][5] +
-            t->Phi[110]*f->P[12][5] + t->Phi[111]*f->P[13][5] + t->Phi[112]*f->P[14][5];
-    w->M[6] = t->Phi[98]*f->P[0][6] + t->Phi[99]*f->P[1][6] + t->Phi[100]*f->P[2][6] +
-            t->Phi[101]*f->P[3][6] + t->Phi[102]*f->P[4][6] + t->Phi[103]*f->P[5][6] +
-            t->Phi[104]*f->P[6][6] + t->Phi[105]*f->P[7][6] + t->Phi[106]*f->P[8][6] +
-            t->Phi[107]*f->P[9][6] + t->Phi[108]*f->P[10][6] + t->Phi[109]*f->P[11][6] +
-            t->Phi[110]*f->P[12][6] + t->Phi[111]*f->P[13][6] + t->Phi[112]*f->P[14][6];
-    w->M[7] = t->Phi[98]*f->P[0][7] + t->Phi[99]*f->P[1][7] + t->Phi[100]*f->P[2][7] +
-            t->Phi[101]*f->P[3][7] + t->Phi[102]*f->P[4][7] + t->Phi[103]*f->P[5][7] +
-            t->Phi[104]*f->P[6][7] + t->Phi[105]*f->P[7][7] + t->Phi[106]*f->P[8][7] +
-            t->Phi[107]*f->P[9][7] + t->Phi[108]*f->P[10][7] + t->Phi[109]*f->P[11][7] +
-            t->Phi[110]*f->P[12][7] + t->Phi[111]*f->P[13][7] + t->Phi[112]*f->P[14][7];
-    w->M[8] = t->Phi[98]*f->P[0][8] + t->Phi[99]*f->P[1][8] + t->Phi[100]*f->P[2][8] +
-            t->Phi[101]*f->P[3][8] + t->Phi[102]*f->P[4][8] + t->Phi[103]*f->P[5][8] +
-            t->Phi[104]*f->P[6][8] + t->Phi[105]*f->P[7][8] + t->Phi[106]*f->P[8][8] +
-            t->Phi[107]*f->P[9][8] + t->Phi[108]*f->P[10][8] + t->Phi[109]*f->P[11][8] +
-            t->Phi[110]*f->P[12][8] + t->Phi[111]*f->P[13][8] + t->Phi[112]*f->P[14][8];
-    w->M[9] = t->Phi[98]*f->P[0][9] + t->Phi[99]*f->P[1][9] + t->Phi[100]*f->P[2][9] +
-            t->Phi[101]*f->P[3][9] + t->Phi[102]*f->P[4][9] + t->Phi[103]*f->P[5][9] +
-            t->Phi[104]*f->P[6][9] + t->Phi[105]*f->P[7][9] + t->Phi[106]*f->P[8][9] +
-            t->Phi[107]*f->P[9][9] + t->Phi[108]*f->P[10][9] + t->Phi[109]*f->P[11][9] +
-            t->Phi[110]*f->P[12][9] + t->Phi[111]*f->P[13][9] + t->Phi[112]*f->P[14][9];
-    w->M[10] = t->Phi[98]*f->P[0][10] + t->Phi[99]*f->P[1][10] + t->Phi[100]*f->P[2][10] +
-            t->Phi[101]*f->P[3][10] + t->Phi[102]*f->P[4][10] + t->Phi[103]*f->P[5][10] +
-            t->Phi[104]*f->P[6][10] + t->Phi[105]*f->P[7][10] + t->Phi[106]*f->P[8][10] +
-            t->Phi[107]*f->P[9][10] + t->Phi[108]*f->P[10][10] + t->Phi[109]*f->P[11][10] +
-            t->Phi[110]*f->P[12][10] + t->Phi[111]*f->P[13][10] + t->Phi[112]*f->P[14][10];
-    w->M[11] = t->Phi[98]*f->P[0][11] + t->Phi[99]*f->P[1][11] + t->Phi[100]*f->P[2][11] +
-            t->Phi[101]*f->P[3][11] + t->Phi[102]*f->P[4][11] + t->Phi[103]*f->P[5][11] +
-            t->Phi[104]*f->P[6][11] + t->Phi[105]*f->P[7][11] + t->Phi[106]*f->P[8][11] +
-            t->Phi[107]*f->P[9][11] + t->Phi[108]*f->P[10][11] + t->Phi[109]*f->P[11][11] +
-            t->Phi[110]*f->P[12][11] + t->Phi[111]*f->P[13][11] + t->Phi[112]*f->P[14][11];
-    w->M[12] = t->Phi[98]*f->P[0][12] + t->Phi[99]*f->P[1][12] + t->Phi[100]*f->P[2][12] +
-            t->Phi[101]*f->P[3][12] + t->Phi[102]*f->P[4][12] + t->Phi[103]*f->P[5][12] +
-            t->Phi[104]*f->P[6][12] + t->Phi[105]*f->P[7][12] + t->Phi[106]*f->P[8][12] +
-            t->Phi[107]*f->P[9][12] + t->Phi[108]*f->P[10][12] + t->Phi[109]*f->P[11][12] +
-            t->Phi[110]*f->P[12][12] + t->Phi[111]*f->P[13][12] + t->Phi[112]*f->P[14][12];
-    w->M[13] = t->Phi[98]*f->P[0][13] + t->Phi[99]*f->P[1][13] + t->Phi[100]*f->P[2][13] +
-            t->Phi[101]*f->P[3][13] + t->Phi[102]*f->P[4][13] + t->Phi[103]*f->P[5][13] +
-            t->Phi[104]*f->P[6][13] + t->Phi[105]*f->P[7][13] + t->Phi[106]*f->P[8][13] +
-            t->Phi[107]*f->P[9][13] + t->Phi[108]*f->P[10][13] + t->Phi[109]*f->P[11][13] +
-            t->Phi[110]*f->P[12][13] + t->Phi[111]*f->P[13][13] + t->Phi[112]*f->P[14][13];
+    int c;
+    lane_pair b[15];
+    b[0] = lane_pair_of(t->Phi[98], t->Phi[98]);
+    b[1] = lane_pair_of(t->Phi[99], t->Phi[99]);
+    b[2] = lane_pair_of(t->Phi[100], t->Phi[100]);
+    b[3] = lane_pair_of(t->Phi[101], t->Phi[101]);
+    b[4] = lane_pair_of(t->Phi[102], t->Phi[102]);
+    b[5] = lane_pair_of(t->Phi[103], t->Phi[103]);
+    b[6] = lane_pair_of(t->Phi[104], t->Phi[104]);
+    b[7] = lane_pair_of(t->Phi[105], t->Phi[105]);
+    b[8] = lane_pair_of(t->Phi[106], t->Phi[106]);
+    b[9] = lane_pair_of(t->Phi[107], t->Phi[107]);
+    b[10] = lane_pair_of(t->Phi[108], t->Phi[108]);
+    b[11] = lane_pair_of(t->Phi[109], t->Phi[109]);
+    b[12] = lane_pair_of(t->Phi[110], t->Phi[110]);
+    b[13] = lane_pair_of(t->Phi[111], t->Phi[111]);
+    b[14] = lane_pair_of(t->Phi[112], t->Phi[112]);
+    for (c = 0; c + 1 < 15; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[14][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[14] = t->Phi[98]*f->P[0][14] + t->Phi[99]*f->P[1][14] + t->Phi[100]*f->P[2][14] +
             t->Phi[101]*f->P[3][14] + t->Phi[102]*f->P[4][14] + t->Phi[103]*f->P[5][14] +
             t->Phi[104]*f->P[6][14] + t->Phi[105]*f->P[7][14] + t->Phi[106]*f->P[8][14] +
@@ -3689,76 +3779,39 @@ INS_GPS15_BLOCK ins_gps15_scalar propagate_row_7(const ins_gps15_transition *res
 INS_GPS15_BLOCK void phi_times_p_row_8(const ins_gps15_filter *restrict f, const
         ins_gps15_transition *restrict t, ins_gps15_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[113]*f->P[0][0] + t->Phi[114]*f->P[1][0] + t->Phi[115]*f->P[2][0] +
-            t->Phi[116]*f->P[3][0] + t->Phi[117]*f->P[4][0] + t->Phi[118]*f->P[5][0] +
-            t->Phi[119]*f->P[6][0] + t->Phi[120]*f->P[8][0] + t->Phi[121]*f->P[9][0] +
-            t->Phi[122]*f->P[10][0] + t->Phi[123]*f->P[11][0] + t->Phi[124]*f->P[12][0] +
-            t->Phi[125]*f->P[13][0] + t->Phi[126]*f->P[14][0];
-    w->M[1] = t->Phi[113]*f->P[0][1] + t->Phi[114]*f->P[1][1] + t->Phi[115]*f->P[2][1] +
-            t->Phi[116]*f->P[3][1] + t->Phi[117]*f->P[4][1] + t->Phi[118]*f->P[5][1] +
-            t->Phi[119]*f->P[6][1] + t->Phi[120]*f->P[8][1] + t->Phi[121]*f->P[9][1] +
-            t->Phi[122]*f->P[10][1] + t->Phi[123]*f->P[11][1] + t->Phi[124]*f->P[12][1] +
-            t->Phi[125]*f->P[13][1] + t->Phi[126]*f->P[14][1];
-    w->M[2] = t->Phi[113]*f->P[0][2] + t->Phi[114]*f->P[1][2] + t->Phi[115]*f->P[2][2] +
-            t->Phi[116]*f->P[3][2] + t->Phi[117]*f->P[4][2] + t->Phi[118]*f->P[5][2] +
-            t->Phi[119]*f->P[6][2] + t->Phi[120]*f->P[8][2] + t->Phi[121]*f->P[9][2] +
-            t->Phi[122]*f->P[10][2] + t->Phi[123]*f->P[11][2] + t->Phi[124]*f->P[12][2] +
-            t->Phi[125]*f->P[13][2] + t->Phi[126]*f->P[14][2];
-    w->M[3] = t->Phi[113]*f->P[0][3] + t->Phi[114]*f->P[1][3] + t->Phi[115]*f->P[2][3] +
-            t->Phi[116]*f->P[3][3] + t->Phi[117]*f->P[4][3] + t->Phi[118]*f->P[5][3] +
-            t->Phi[119]*f->P[6][3] + t->Phi[120]*f->P[8][3] + t->Phi[121]*f->P[9][3] +
-            t->Phi[122]*f->P[10][3] + t->Phi[123]*f->P[11][3] + t->Phi[124]*f->P[12][3] +
-            t->Phi[125]*f->P[13][3] + t->Phi[126]*f->P[14][3];
-    w->M[4] = t->Phi[113]*f->P[0][4] + t->Phi[114]*f->P[1][4] + t->Phi[115]*f->P[2][4] +
-            t->Phi[116]*f->P[3][4] + t->Phi[117]*f->P[4][4] + t->Phi[118]*f->P[5][4] +
-            t->Phi[119]*f->P[6][4] + t->Phi[120]*f->P[8][4] + t->Phi[121]*f->P[9][4] +
-            t->Phi[122]*f->P[10][4] + t->Phi[123]*f->P[11][4] + t->Phi[124]*f->P[12][4] +
-            t->Phi[125]*f->P[13][4] + t->Phi[126]*f->P[14][4];
-    w->M[5] = t->Phi[113]*f->P[0][5] + t->Phi[114]*f->P[1][5] + t->Phi[115]*f->P[2][5] +
-            t->Phi[116]*f->P[3][5] + t->Phi[117]*f->P[4][5] + t->Phi[118]*f->P[5][5] +
-            t->Phi[119]*f->P[6][5] + t->Phi[120]*f->P[8][5] + t->Phi[121]*f->P[9][5] +
-            t->Phi[122]*f->P[10][5] + t->Phi[123]*f->P[11][5] + t->Phi[124]*f->P[12][5] +
-            t->Phi[125]*f->P[13][5] + t->Phi[126]*f->P[14][5];
-    w->M[6] = t->Phi[113]*f->P[0][6] + t->Phi[114]*f->P[1][6] + t->Phi[115]*f->P[2][6] +
-            t->Phi[116]*f->P[3][6] + t->Phi[117]*f->P[4][6] + t->Phi[118]*f->P[5][6] +
-            t->Phi[119]*f->P[6][6] + t->Phi[120]*f->P[8][6] + t->Phi[121]*f->P[9][6] +
-            t->Phi[122]*f->P[10][6] + t->Phi[123]*f->P[11][6] + t->Phi[124]*f->P[12][6] +
-            t->Phi[125]*f->P[13][6] + t->Phi[126]*f->P[14][6];
-    w->M[7] = t->Phi[113]*f->P[0][7] + t->Phi[114]*f->P[1][7] + t->Phi[115]*f->P[2][7] +
-            t->Phi[116]*f->P[3][7] + t->Phi[117]*f->P[4][7] + t->Phi[118]*f->P[5][7] +
-            t->Phi[119]*f->P[6][7] + t->Phi[120]*f->P[8][7] + t->Phi[121]*f->P[9][7] +
-            t->Phi[122]*f->P[10][7] + t->Phi[123]*f->P[11][7] + t->Phi[124]*f->P[12][7] +
-            t->Phi[125]*f->P[13][7] + t->Phi[126]*f->P[14][7];
-    w->M[8] = t->Phi[113]*f->P[0][8] + t->Phi[114]*f->P[1][8] + t->Phi[115]*f->P[2][8] +
-            t->Phi[116]*f->P[3][8] + t->Phi[117]*f->P[4][8] + t->Phi[118]*f->P[5][8] +
-            t->Phi[119]*f->P[6][8] + t->Phi[120]*f->P[8][8] + t->Phi[121]*f->P[9][8] +
-            t->Phi[122]*f->P[10][8] + t->Phi[123]*f->P[11][8] + t->Phi[124]*f->P[12][8] +
-            t->Phi[125]*f->P[13][8] + t->Phi[126]*f->P[14][8];
-    w->M[9] = t->Phi[113]*f->P[0][9] + t->Phi[114]*f->P[1][9] + t->Phi[115]*f->P[2][9] +
-            t->Phi[116]*f->P[3][9] + t->Phi[117]*f->P[4][9] + t->Phi[118]*f->P[5][9] +
-            t->Phi[119]*f->P[6][9] + t->Phi[120]*f->P[8][9] + t->Phi[121]*f->P[9][9] +
-            t->Phi[122]*f->P[10][9] + t->Phi[123]*f->P[11][9] + t->Phi[124]*f->P[12][9] +
-            t->Phi[125]*f->P[13][9] + t->Phi[126]*f->P[14][9];
-    w->M[10] = t->Phi[113]*f->P[0][10] + t->Phi[114]*f->P[1][10] + t->Phi[115]*f->P[2][10] +
-            t->Phi[116]*f->P[3][10] + t->Phi[117]*f->P[4][10] + t->Phi[118]*f->P[5][10] +
-            t->Phi[119]*f->P[6][10] + t->Phi[120]*f->P[8][10] + t->Phi[121]*f->P[9][10] +
-            t->Phi[122]*f->P[10][10] + t->Phi[123]*f->P[11][10] + t->Phi[124]*f->P[12][10] +
-            t->Phi[125]*f->P[13][10] + t->Phi[126]*f->P[14][10];
-    w->M[11] = t->Phi[113]*f->P[0][11] + t->Phi[114]*f->P[1][11] + t->Phi[115]*f->P[2][11] +
-            t->Phi[116]*f->P[3][11] + t->Phi[117]*f->P[4][11] + t->Phi[118]*f->P[5][11] +
-            t->Phi[119]*f->P[6][11] + t->Phi[120]*f->P[8][11] + t->Phi[121]*f->P[9][11] +
-            t->Phi[122]*f->P[10][11] + t->Phi[123]*f->P[11][11] + t->Phi[124]*f->P[12][11] +
-            t->Phi[125]*f->P[13][11] + t->Phi[126]*f->P[14][11];
-    w->M[12] = t->Phi[113]*f->P[0][12] + t->Phi[114]*f->P[1][12] + t->Phi[115]*f->P[2][12] +
-            t->Phi[116]*f->P[3][12] + t->Phi[117]*f->P[4][12] + t->Phi[118]*f->P[5][12] +
-            t->Phi[119]*f->P[6][12] + t->Phi[120]*f->P[8][12] + t->Phi[121]*f->P[9][12] +
-            t->Phi[122]*f->P[10][12] + t->Phi[123]*f->P[11][12] + t->Phi[124]*f->P[12][12] +
-            t->Phi[125]*f->P[13][12] + t->Phi[126]*f->P[14][12];
-    w->M[13] = t->Phi[113]*f->P[0][13] + t->Phi[114]*f->P[1][13] + t->Phi[115]*f->P[2][13] +
-            t->Phi[116]*f->P[3][13] + t->Phi[117]*f->P[4][13] + t->Phi[118]*f->P[5][13] +
-            t->Phi[119]*f->P[6][13] + t->Phi[120]*f->P[8][13] + t->Phi[121]*f->P[9][13] +
-            t->Phi[122]*f->P[10][13] + t->Phi[123]*f->P[11][13] + t->Phi[124]*f->P[12][13] +
-            t->Phi[125]*f->P[13][13] + t->Phi[126]*f->P[14][13];
+    int c;
+    lane_pair b[14];
+    b[0] = lane_pair_of(t->Phi[113], t->Phi[113]);
+    b[1] = lane_pair_of(t->Phi[114], t->Phi[114]);
+    b[2] = lane_pair_of(t->Phi[115], t->Phi[115]);
+    b[3] = lane_pair_of(t->Phi[116], t->Phi[116]);
+    b[4] = lane_pair_of(t->Phi[117], t->Phi[117]);
+    b[5] = lane_pair_of(t->Phi[118], t->Phi[118]);
+    b[6] = lane_pair_of(t->Phi[119], t->Phi[119]);
+    b[7] = lane_pair_of(t->Phi[120], t->Phi[120]);
+    b[8] = lane_pair_of(t->Phi[121], t->Phi[121]);
+    b[9] = lane_pair_of(t->Phi[122], t->Phi[122]);
+    b[10] = lane_pair_of(t->Phi[123], t->Phi[123]);
+    b[11] = lane_pair_of(t->Phi[124], t->Phi[124]);
+    b[12] = lane_pair_of(t->Phi[125], t->Phi[125]);
+    b[13] = lane_pair_of(t->Phi[126], t->Phi[126]);
+    for (c = 0; c + 1 < 15; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[14] = t->Phi[113]*f->P[0][14] + t->Phi[114]*f->P[1][14] + t->Phi[115]*f->P[2][14] +
             t->Phi[116]*f->P[3][14] + t->Phi[117]*f->P[4][14] + t->Phi[118]*f->P[5][14] +
             t->Phi[119]*f->P[6][14] + t->Phi[120]*f->P[8][14] + t->Phi[121]*f->P[9][14] +
@@ -3787,81 +3840,6 @@ static ins_gps15_scalar propagate_row_8(const ins_gps15_transition *restrict t,
     v = w->M[12]; w->Pn[96] = v; check += v;
     v = w->M[13]; w->Pn[97] = v; check += v;
     v = w->M[14]; w->Pn[98] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ins_gps15_scalar propagate_row_9(const ins_gps15_filter *restrict f, ins_gps15_filter_scratch
-        *restrict w)
-{
-    ins_gps15_scalar v, check = 0.0;
-    v = f->P[9][9]; w->Pn[99] = v; check += v;
-    v = f->P[9][10]; w->Pn[100] = v; check += v;
-    v = f->P[9][11]; w->Pn[101] = v; check += v;
-    v = f->P[9][12]; w->Pn[102] = v; check += v;
-    v = f->P[9][13]; w->Pn[103] = v; check += v;
-    v = f->P[9][14]; w->Pn[104] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ins_gps15_scalar propagate_row_10(const ins_gps15_filter *restrict f,
-        ins_gps15_filter_scratch *restrict w)
-{
-    ins_gps15_scalar v, check = 0.0;
-    v = f->P[10][10]; w->Pn[105] = v; check += v;
-    v = f->P[10][11]; w->Pn[106] = v; check += v;
-    v = f->P[10][12]; w->Pn[107] = v; check += v;
-    v = f->P[10][13]; w->Pn[108] = v; check += v;
-    v = f->P[10][14]; w->Pn[109] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ins_gps15_scalar propagate_row_11(const ins_gps15_filter *restrict f,
-        ins_gps15_filter_scratch *restrict w)
-{
-    ins_gps15_scalar v, check = 0.0;
-    v = f->P[11][11]; w->Pn[110] = v; check += v;
-    v = f->P[11][12]; w->Pn[111] = v; check += v;
-    v = f->P[11][13]; w->Pn[112] = v; check += v;
-    v = f->P[11][14]; w->Pn[113] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ins_gps15_scalar propagate_row_12(const ins_gps15_filter *restrict f,
-        ins_gps15_filter_scratch *restrict w)
-{
-    ins_gps15_scalar v, check = 0.0;
-    v = f->P[12][12]; w->Pn[114] = v; check += v;
-    v = f->P[12][13]; w->Pn[115] = v; check += v;
-    v = f->P[12][14]; w->Pn[116] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ins_gps15_scalar propagate_row_13(const ins_gps15_filter *restrict f,
-        ins_gps15_filter_scratch *restrict w)
-{
-    ins_gps15_scalar v, check = 0.0;
-    v = f->P[13][13]; w->Pn[117] = v; check += v;
-    v = f->P[13][14]; w->Pn[118] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ins_gps15_scalar propagate_row_14(const ins_gps15_filter *restrict f,
-        ins_gps15_filter_scratch *restrict w)
-{
-    ins_gps15_scalar v, check = 0.0;
-    v = f->P[14][14]; w->Pn[119] = v; check += v;
     return check - check;
 }
 
@@ -3932,17 +3910,35 @@ int ins_gps15_predict(ins_gps15_filter *restrict f, const ins_gps15_transition *
     sum_check += propagate_row_7(t, w);
     phi_times_p_row_8(f, t, w);
     sum_check += propagate_row_8(t, w);
-    sum_check += propagate_row_9(f, w);
-    sum_check += propagate_row_10(f, w);
-    sum_check += propagate_row_11(f, w);
-    sum_check += propagate_row_12(f, w);
-    sum_check += propagate_row_13(f, w);
-    sum_check += propagate_row_14(f, w);
     /* a row's sum that is not finite: a value that is not, or an overflow of finite values */
-    if (sum_check != 0.0) {
+    if (sum_check != 0.0) { /* the entries of Pn computed (the kept pairs are not) */
         int e;
         sum_check = 0.0;
-        for (e = 0; e < INS_GPS15_N_PACKED; ++e) {
+        for (e = 0; e < 15; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 15; e < 29; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 29; e < 42; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 42; e < 54; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 54; e < 65; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 65; e < 75; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 75; e < 84; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 84; e < 92; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 92; e < 99; ++e) {
             sum_check += w->Pn[e] - w->Pn[e];
         }
     }
@@ -4059,27 +4055,6 @@ int ins_gps15_predict(ins_gps15_filter *restrict f, const ins_gps15_transition *
     f->P[12][8] = f->P[8][12];
     f->P[13][8] = f->P[8][13];
     f->P[14][8] = f->P[8][14];
-    memcpy(&f->P[9][9], &w->Pn[99], 6 * sizeof w->Pn[0]);
-    f->P[10][9] = f->P[9][10];
-    f->P[11][9] = f->P[9][11];
-    f->P[12][9] = f->P[9][12];
-    f->P[13][9] = f->P[9][13];
-    f->P[14][9] = f->P[9][14];
-    memcpy(&f->P[10][10], &w->Pn[105], 5 * sizeof w->Pn[0]);
-    f->P[11][10] = f->P[10][11];
-    f->P[12][10] = f->P[10][12];
-    f->P[13][10] = f->P[10][13];
-    f->P[14][10] = f->P[10][14];
-    memcpy(&f->P[11][11], &w->Pn[110], 4 * sizeof w->Pn[0]);
-    f->P[12][11] = f->P[11][12];
-    f->P[13][11] = f->P[11][13];
-    f->P[14][11] = f->P[11][14];
-    memcpy(&f->P[12][12], &w->Pn[114], 3 * sizeof w->Pn[0]);
-    f->P[13][12] = f->P[12][13];
-    f->P[14][12] = f->P[12][14];
-    memcpy(&f->P[13][13], &w->Pn[117], 2 * sizeof w->Pn[0]);
-    f->P[14][13] = f->P[13][14];
-    memcpy(&f->P[14][14], &w->Pn[119], 1 * sizeof w->Pn[0]);
     return INS_GPS15_OK;
 }
 

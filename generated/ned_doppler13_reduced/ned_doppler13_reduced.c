@@ -768,20 +768,69 @@ NED_DOPPLER13_REDUCED_BLOCK void horner_last_into_S(ned_doppler13_reduced_discre
 NED_DOPPLER13_REDUCED_BLOCK void horner_unit_columns(ned_doppler13_reduced_discretize_scratch
         *restrict w)
 {
-    w->S[58] = w->term[1][0]*w->fh[4] + w->term[1][1]*w->fh[11] + w->term[1][2]*w->fh[19];
-    w->S[59] = w->term[1][0]*w->fh[5] + w->term[1][1]*w->fh[12] + w->term[1][2]*w->fh[20];
-    w->S[60] = w->term[1][8]*w->fh[4] + w->term[1][9]*w->fh[11] + w->term[1][10]*w->fh[19];
-    w->S[61] = w->term[1][8]*w->fh[5] + w->term[1][9]*w->fh[12] + w->term[1][10]*w->fh[20];
-    w->S[62] = w->term[1][16]*w->fh[4] + w->term[1][17]*w->fh[11] + w->term[1][18]*w->fh[19];
-    w->S[63] = w->term[1][16]*w->fh[5] + w->term[1][17]*w->fh[12] + w->term[1][18]*w->fh[20];
-    w->S[64] = w->term[1][24]*w->fh[4] + w->term[1][25]*w->fh[11] + w->term[1][26]*w->fh[19];
-    w->S[65] = w->term[1][24]*w->fh[5] + w->term[1][25]*w->fh[12] + w->term[1][26]*w->fh[20];
-    w->S[66] = w->term[1][32]*w->fh[4] + w->term[1][33]*w->fh[11] + w->term[1][34]*w->fh[19];
-    w->S[67] = w->term[1][32]*w->fh[5] + w->term[1][33]*w->fh[12] + w->term[1][34]*w->fh[20];
-    w->S[68] = w->term[1][40]*w->fh[4] + w->term[1][41]*w->fh[11] + w->term[1][42]*w->fh[19];
-    w->S[69] = w->term[1][40]*w->fh[5] + w->term[1][41]*w->fh[12] + w->term[1][42]*w->fh[20];
-    w->S[71] = w->term[1][48]*w->fh[4] + w->term[1][49]*w->fh[11] + w->term[1][50]*w->fh[19];
-    w->S[72] = w->term[1][48]*w->fh[5] + w->term[1][49]*w->fh[12] + w->term[1][50]*w->fh[20];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&w->S[58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][8], w->term[1][8]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][9], w->term[1][9]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][10], w->term[1][10]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&w->S[60], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][16], w->term[1][16]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][17], w->term[1][17]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][18], w->term[1][18]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&w->S[62], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&w->S[64], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][32], w->term[1][32]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][33], w->term[1][33]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][34], w->term[1][34]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&w->S[66], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][40], w->term[1][40]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][41], w->term[1][41]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][42], w->term[1][42]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&w->S[68], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&w->S[71], pair);
+    }
 }
 
 NED_DOPPLER13_REDUCED_BLOCK void horner_transition(ned_doppler13_reduced_transition *restrict t,
@@ -847,20 +896,69 @@ NED_DOPPLER13_REDUCED_BLOCK void horner_transition(ned_doppler13_reduced_transit
     t->Phi[29] = t->Phi[29] + w->fh[22]*w->S[57];
     t->Phi[73] = w->fh[36]*w->S[56];
     t->Phi[74] = w->fh[37]*w->S[57];
-    t->Phi[6] = w->S[0]*w->fh[4] + w->S[1]*w->fh[11] + w->S[2]*w->fh[19];
-    t->Phi[7] = w->S[0]*w->fh[5] + w->S[1]*w->fh[12] + w->S[2]*w->fh[20];
-    t->Phi[16] = w->S[8]*w->fh[4] + w->S[9]*w->fh[11] + w->S[10]*w->fh[19];
-    t->Phi[17] = w->S[8]*w->fh[5] + w->S[9]*w->fh[12] + w->S[10]*w->fh[20];
-    t->Phi[26] = w->S[16]*w->fh[4] + w->S[17]*w->fh[11] + w->S[18]*w->fh[19];
-    t->Phi[27] = w->S[16]*w->fh[5] + w->S[17]*w->fh[12] + w->S[18]*w->fh[20];
-    t->Phi[36] = w->S[24]*w->fh[4] + w->S[25]*w->fh[11] + w->S[26]*w->fh[19];
-    t->Phi[37] = w->S[24]*w->fh[5] + w->S[25]*w->fh[12] + w->S[26]*w->fh[20];
-    t->Phi[46] = w->S[32]*w->fh[4] + w->S[33]*w->fh[11] + w->S[34]*w->fh[19];
-    t->Phi[47] = w->S[32]*w->fh[5] + w->S[33]*w->fh[12] + w->S[34]*w->fh[20];
-    t->Phi[56] = w->S[40]*w->fh[4] + w->S[41]*w->fh[11] + w->S[42]*w->fh[19];
-    t->Phi[57] = w->S[40]*w->fh[5] + w->S[41]*w->fh[12] + w->S[42]*w->fh[20];
-    t->Phi[67] = w->S[48]*w->fh[4] + w->S[49]*w->fh[11] + w->S[50]*w->fh[19];
-    t->Phi[68] = w->S[48]*w->fh[5] + w->S[49]*w->fh[12] + w->S[50]*w->fh[20];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&t->Phi[6], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[8], w->S[8]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[9], w->S[9]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[10], w->S[10]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&t->Phi[16], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[16], w->S[16]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[17], w->S[17]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[18], w->S[18]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&t->Phi[26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&t->Phi[36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[32], w->S[32]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[33], w->S[33]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[34], w->S[34]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&t->Phi[46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[40], w->S[40]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[41], w->S[41]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[42], w->S[42]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&t->Phi[56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&w->fh[11]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&w->fh[19]));
+        lane_pair_store(&t->Phi[67], pair);
+    }
     t->Phi[66] = 0;
     t->Phi[71] = one;
     t->Phi[72] = one;
@@ -1261,44 +1359,79 @@ NED_DOPPLER13_REDUCED_BLOCK void noise_input(const ned_doppler13_reduced_matrice
     w->term[0][0] = w->S[6]*m->G[9];
     w->term[0][1] = w->S[7]*m->G[10];
     w->term[0][2] = w->S[0]*m->G[0] + w->S[1]*m->G[1] + w->S[2]*m->G[2];
-    w->term[0][3] = w->S[3]*m->G[3] + w->S[4]*m->G[6];
-    w->term[0][4] = w->S[3]*m->G[4] + w->S[4]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[3], w->S[3]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[4], w->S[4]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][3], pair);
+    }
     w->term[0][5] = w->S[3]*m->G[5] + w->S[4]*m->G[8];
     w->term[0][6] = w->S[14]*m->G[9];
     w->term[0][7] = w->S[15]*m->G[10];
     w->term[0][8] = w->S[8]*m->G[0] + w->S[9]*m->G[1] + w->S[10]*m->G[2];
-    w->term[0][9] = w->S[11]*m->G[3] + w->S[12]*m->G[6];
-    w->term[0][10] = w->S[11]*m->G[4] + w->S[12]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[11], w->S[11]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[12], w->S[12]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][9], pair);
+    }
     w->term[0][11] = w->S[11]*m->G[5] + w->S[12]*m->G[8];
     w->term[0][12] = w->S[22]*m->G[9];
     w->term[0][13] = w->S[23]*m->G[10];
     w->term[0][14] = w->S[16]*m->G[0] + w->S[17]*m->G[1] + w->S[18]*m->G[2];
-    w->term[0][15] = w->S[19]*m->G[3] + w->S[20]*m->G[6];
-    w->term[0][16] = w->S[19]*m->G[4] + w->S[20]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[19], w->S[19]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[20], w->S[20]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][15], pair);
+    }
     w->term[0][17] = w->S[19]*m->G[5] + w->S[20]*m->G[8];
     w->term[0][18] = w->S[30]*m->G[9];
     w->term[0][19] = w->S[31]*m->G[10];
     w->term[0][20] = w->S[24]*m->G[0] + w->S[25]*m->G[1] + w->S[26]*m->G[2];
-    w->term[0][21] = w->S[27]*m->G[3] + w->S[28]*m->G[6];
-    w->term[0][22] = w->S[27]*m->G[4] + w->S[28]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[27], w->S[27]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[28], w->S[28]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][21], pair);
+    }
     w->term[0][23] = w->S[27]*m->G[5] + w->S[28]*m->G[8];
     w->term[0][24] = w->S[38]*m->G[9];
     w->term[0][25] = w->S[39]*m->G[10];
     w->term[0][26] = w->S[32]*m->G[0] + w->S[33]*m->G[1] + w->S[34]*m->G[2];
-    w->term[0][27] = w->S[35]*m->G[3] + w->S[36]*m->G[6];
-    w->term[0][28] = w->S[35]*m->G[4] + w->S[36]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[35], w->S[35]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[36], w->S[36]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][27], pair);
+    }
     w->term[0][29] = w->S[35]*m->G[5] + w->S[36]*m->G[8];
     w->term[0][30] = w->S[46]*m->G[9];
     w->term[0][31] = w->S[47]*m->G[10];
     w->term[0][32] = w->S[40]*m->G[0] + w->S[41]*m->G[1] + w->S[42]*m->G[2];
-    w->term[0][33] = w->S[43]*m->G[3] + w->S[44]*m->G[6];
-    w->term[0][34] = w->S[43]*m->G[4] + w->S[44]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[43], w->S[43]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[44], w->S[44]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][33], pair);
+    }
     w->term[0][35] = w->S[43]*m->G[5] + w->S[44]*m->G[8];
     w->term[0][36] = w->S[54]*m->G[9];
     w->term[0][37] = w->S[55]*m->G[10];
     w->term[0][38] = w->S[48]*m->G[0] + w->S[49]*m->G[1] + w->S[50]*m->G[2];
-    w->term[0][39] = w->S[51]*m->G[3] + w->S[52]*m->G[6];
-    w->term[0][40] = w->S[51]*m->G[4] + w->S[52]*m->G[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[51], w->S[51]),
+                lane_pair_load(&m->G[3]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[52], w->S[52]),
+                lane_pair_load(&m->G[6]));
+        lane_pair_store(&w->term[0][39], pair);
+    }
     w->term[0][41] = w->S[51]*m->G[5] + w->S[52]*m->G[8];
     w->term[0][42] = w->S[56]*m->G[9];
     w->term[0][43] = w->S[57]*m->G[10];
@@ -1308,12 +1441,18 @@ NED_DOPPLER13_REDUCED_BLOCK void process_noise(const ned_doppler13_reduced_matri
         ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_discretize_scratch
         *restrict w, const ned_doppler13_reduced_scalar T)
 {
-    w->term[1][44] = T*m->q[0];
-    w->term[1][45] = T*m->q[1];
-    w->term[1][46] = T*m->q[2];
-    w->term[1][47] = T*m->q[3];
-    w->term[1][48] = T*m->q[4];
-    w->term[1][49] = T*m->q[5];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[0]));
+        lane_pair_store(&w->term[1][44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[2]));
+        lane_pair_store(&w->term[1][46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[4]));
+        lane_pair_store(&w->term[1][48], pair);
+    }
     w->term[1][0] = w->term[0][0]*w->term[1][44];
     w->term[1][1] = w->term[0][1]*w->term[1][45];
     w->term[1][2] = w->term[0][2]*w->term[1][46];
@@ -1974,54 +2113,31 @@ NED_DOPPLER13_REDUCED_BLOCK void phi_times_p_row_0(const ned_doppler13_reduced_f
         const ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[0]*f->P[0][0] + t->Phi[1]*f->P[1][0] + t->Phi[2]*f->P[2][0] +
-            t->Phi[3]*f->P[3][0] + t->Phi[4]*f->P[4][0] + t->Phi[5]*f->P[5][0] +
-            t->Phi[6]*f->P[7][0] + t->Phi[7]*f->P[8][0] + t->Phi[8]*f->P[9][0] +
-            t->Phi[9]*f->P[10][0];
-    w->M[1] = t->Phi[0]*f->P[0][1] + t->Phi[1]*f->P[1][1] + t->Phi[2]*f->P[2][1] +
-            t->Phi[3]*f->P[3][1] + t->Phi[4]*f->P[4][1] + t->Phi[5]*f->P[5][1] +
-            t->Phi[6]*f->P[7][1] + t->Phi[7]*f->P[8][1] + t->Phi[8]*f->P[9][1] +
-            t->Phi[9]*f->P[10][1];
-    w->M[2] = t->Phi[0]*f->P[0][2] + t->Phi[1]*f->P[1][2] + t->Phi[2]*f->P[2][2] +
-            t->Phi[3]*f->P[3][2] + t->Phi[4]*f->P[4][2] + t->Phi[5]*f->P[5][2] +
-            t->Phi[6]*f->P[7][2] + t->Phi[7]*f->P[8][2] + t->Phi[8]*f->P[9][2] +
-            t->Phi[9]*f->P[10][2];
-    w->M[3] = t->Phi[0]*f->P[0][3] + t->Phi[1]*f->P[1][3] + t->Phi[2]*f->P[2][3] +
-            t->Phi[3]*f->P[3][3] + t->Phi[4]*f->P[4][3] + t->Phi[5]*f->P[5][3] +
-            t->Phi[6]*f->P[7][3] + t->Phi[7]*f->P[8][3] + t->Phi[8]*f->P[9][3] +
-            t->Phi[9]*f->P[10][3];
-    w->M[4] = t->Phi[0]*f->P[0][4] + t->Phi[1]*f->P[1][4] + t->Phi[2]*f->P[2][4] +
-            t->Phi[3]*f->P[3][4] + t->Phi[4]*f->P[4][4] + t->Phi[5]*f->P[5][4] +
-            t->Phi[6]*f->P[7][4] + t->Phi[7]*f->P[8][4] + t->Phi[8]*f->P[9][4] +
-            t->Phi[9]*f->P[10][4];
-    w->M[5] = t->Phi[0]*f->P[0][5] + t->Phi[1]*f->P[1][5] + t->Phi[2]*f->P[2][5] +
-            t->Phi[3]*f->P[3][5] + t->Phi[4]*f->P[4][5] + t->Phi[5]*f->P[5][5] +
-            t->Phi[6]*f->P[7][5] + t->Phi[7]*f->P[8][5] + t->Phi[8]*f->P[9][5] +
-            t->Phi[9]*f->P[10][5];
-    w->M[6] = t->Phi[0]*f->P[0][6] + t->Phi[1]*f->P[1][6] + t->Phi[2]*f->P[2][6] +
-            t->Phi[3]*f->P[3][6] + t->Phi[4]*f->P[4][6] + t->Phi[5]*f->P[5][6] +
-            t->Phi[6]*f->P[7][6] + t->Phi[7]*f->P[8][6] + t->Phi[8]*f->P[9][6] +
-            t->Phi[9]*f->P[10][6];
-    w->M[7] = t->Phi[0]*f->P[0][7] + t->Phi[1]*f->P[1][7] + t->Phi[2]*f->P[2][7] +
-            t->Phi[3]*f->P[3][7] + t->Phi[4]*f->P[4][7] + t->Phi[5]*f->P[5][7] +
-            t->Phi[6]*f->P[7][7] + t->Phi[7]*f->P[8][7] + t->Phi[8]*f->P[9][7] +
-            t->Phi[9]*f->P[10][7];
-    w->M[8] = t->Phi[0]*f->P[0][8] + t->Phi[1]*f->P[1][8] + t->Phi[2]*f->P[2][8] +
-            t->Phi[3]*f->P[3][8] + t->Phi[4]*f->P[4][8] + t->Phi[5]*f->P[5][8] +
-            t->Phi[6]*f->P[7][8] + t->Phi[7]*f->P[8][8] + t->Phi[8]*f->P[9][8] +
-            t->Phi[9]*f->P[10][8];
-    w->M[9] = t->Phi[0]*f->P[0][9] + t->Phi[1]*f->P[1][9] + t->Phi[2]*f->P[2][9] +
-            t->Phi[3]*f->P[3][9] + t->Phi[4]*f->P[4][9] + t->Phi[5]*f->P[5][9] +
-            t->Phi[6]*f->P[7][9] + t->Phi[7]*f->P[8][9] + t->Phi[8]*f->P[9][9] +
-            t->Phi[9]*f->P[10][9];
-    w->M[10] = t->Phi[0]*f->P[0][10] + t->Phi[1]*f->P[1][10] + t->Phi[2]*f->P[2][10] +
-            t->Phi[3]*f->P[3][10] + t->Phi[4]*f->P[4][10] + t->Phi[5]*f->P[5][10] +
-            t->Phi[6]*f->P[7][10] + t->Phi[7]*f->P[8][10] + t->Phi[8]*f->P[9][10] +
-            t->Phi[9]*f->P[10][10];
-    w->M[11] = t->Phi[0]*f->P[0][11] + t->Phi[1]*f->P[1][11] + t->Phi[2]*f->P[2][11] +
-            t->Phi[3]*f->P[3][11] + t->Phi[4]*f->P[4][11] + t->Phi[5]*f->P[5][11] +
-            t->Phi[6]*f->P[7][11] + t->Phi[7]*f->P[8][11] + t->Phi[8]*f->P[9][11] +
-            t->Phi[9]*f->P[10][11];
+    int c;
+    lane_pair b[10];
+    b[0] = lane_pair_of(t->Phi[0], t->Phi[0]);
+    b[1] = lane_pair_of(t->Phi[1], t->Phi[1]);
+    b[2] = lane_pair_of(t->Phi[2], t->Phi[2]);
+    b[3] = lane_pair_of(t->Phi[3], t->Phi[3]);
+    b[4] = lane_pair_of(t->Phi[4], t->Phi[4]);
+    b[5] = lane_pair_of(t->Phi[5], t->Phi[5]);
+    b[6] = lane_pair_of(t->Phi[6], t->Phi[6]);
+    b[7] = lane_pair_of(t->Phi[7], t->Phi[7]);
+    b[8] = lane_pair_of(t->Phi[8], t->Phi[8]);
+    b[9] = lane_pair_of(t->Phi[9], t->Phi[9]);
+    for (c = 0; c + 1 < 13; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[12] = t->Phi[0]*f->P[0][12] + t->Phi[1]*f->P[1][12] + t->Phi[2]*f->P[2][12] +
             t->Phi[3]*f->P[3][12] + t->Phi[4]*f->P[4][12] + t->Phi[5]*f->P[5][12] +
             t->Phi[6]*f->P[7][12] + t->Phi[7]*f->P[8][12] + t->Phi[8]*f->P[9][12] +
@@ -2091,54 +2207,31 @@ NED_DOPPLER13_REDUCED_BLOCK void phi_times_p_row_1(const ned_doppler13_reduced_f
         const ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[10]*f->P[0][0] + t->Phi[11]*f->P[1][0] + t->Phi[12]*f->P[2][0] +
-            t->Phi[13]*f->P[3][0] + t->Phi[14]*f->P[4][0] + t->Phi[15]*f->P[5][0] +
-            t->Phi[16]*f->P[7][0] + t->Phi[17]*f->P[8][0] + t->Phi[18]*f->P[9][0] +
-            t->Phi[19]*f->P[10][0];
-    w->M[1] = t->Phi[10]*f->P[0][1] + t->Phi[11]*f->P[1][1] + t->Phi[12]*f->P[2][1] +
-            t->Phi[13]*f->P[3][1] + t->Phi[14]*f->P[4][1] + t->Phi[15]*f->P[5][1] +
-            t->Phi[16]*f->P[7][1] + t->Phi[17]*f->P[8][1] + t->Phi[18]*f->P[9][1] +
-            t->Phi[19]*f->P[10][1];
-    w->M[2] = t->Phi[10]*f->P[0][2] + t->Phi[11]*f->P[1][2] + t->Phi[12]*f->P[2][2] +
-            t->Phi[13]*f->P[3][2] + t->Phi[14]*f->P[4][2] + t->Phi[15]*f->P[5][2] +
-            t->Phi[16]*f->P[7][2] + t->Phi[17]*f->P[8][2] + t->Phi[18]*f->P[9][2] +
-            t->Phi[19]*f->P[10][2];
-    w->M[3] = t->Phi[10]*f->P[0][3] + t->Phi[11]*f->P[1][3] + t->Phi[12]*f->P[2][3] +
-            t->Phi[13]*f->P[3][3] + t->Phi[14]*f->P[4][3] + t->Phi[15]*f->P[5][3] +
-            t->Phi[16]*f->P[7][3] + t->Phi[17]*f->P[8][3] + t->Phi[18]*f->P[9][3] +
-            t->Phi[19]*f->P[10][3];
-    w->M[4] = t->Phi[10]*f->P[0][4] + t->Phi[11]*f->P[1][4] + t->Phi[12]*f->P[2][4] +
-            t->Phi[13]*f->P[3][4] + t->Phi[14]*f->P[4][4] + t->Phi[15]*f->P[5][4] +
-            t->Phi[16]*f->P[7][4] + t->Phi[17]*f->P[8][4] + t->Phi[18]*f->P[9][4] +
-            t->Phi[19]*f->P[10][4];
-    w->M[5] = t->Phi[10]*f->P[0][5] + t->Phi[11]*f->P[1][5] + t->Phi[12]*f->P[2][5] +
-            t->Phi[13]*f->P[3][5] + t->Phi[14]*f->P[4][5] + t->Phi[15]*f->P[5][5] +
-            t->Phi[16]*f->P[7][5] + t->Phi[17]*f->P[8][5] + t->Phi[18]*f->P[9][5] +
-            t->Phi[19]*f->P[10][5];
-    w->M[6] = t->Phi[10]*f->P[0][6] + t->Phi[11]*f->P[1][6] + t->Phi[12]*f->P[2][6] +
-            t->Phi[13]*f->P[3][6] + t->Phi[14]*f->P[4][6] + t->Phi[15]*f->P[5][6] +
-            t->Phi[16]*f->P[7][6] + t->Phi[17]*f->P[8][6] + t->Phi[18]*f->P[9][6] +
-            t->Phi[19]*f->P[10][6];
-    w->M[7] = t->Phi[10]*f->P[0][7] + t->Phi[11]*f->P[1][7] + t->Phi[12]*f->P[2][7] +
-            t->Phi[13]*f->P[3][7] + t->Phi[14]*f->P[4][7] + t->Phi[15]*f->P[5][7] +
-            t->Phi[16]*f->P[7][7] + t->Phi[17]*f->P[8][7] + t->Phi[18]*f->P[9][7] +
-            t->Phi[19]*f->P[10][7];
-    w->M[8] = t->Phi[10]*f->P[0][8] + t->Phi[11]*f->P[1][8] + t->Phi[12]*f->P[2][8] +
-            t->Phi[13]*f->P[3][8] + t->Phi[14]*f->P[4][8] + t->Phi[15]*f->P[5][8] +
-            t->Phi[16]*f->P[7][8] + t->Phi[17]*f->P[8][8] + t->Phi[18]*f->P[9][8] +
-            t->Phi[19]*f->P[10][8];
-    w->M[9] = t->Phi[10]*f->P[0][9] + t->Phi[11]*f->P[1][9] + t->Phi[12]*f->P[2][9] +
-            t->Phi[13]*f->P[3][9] + t->Phi[14]*f->P[4][9] + t->Phi[15]*f->P[5][9] +
-            t->Phi[16]*f->P[7][9] + t->Phi[17]*f->P[8][9] + t->Phi[18]*f->P[9][9] +
-            t->Phi[19]*f->P[10][9];
-    w->M[10] = t->Phi[10]*f->P[0][10] + t->Phi[11]*f->P[1][10] + t->Phi[12]*f->P[2][10] +
-            t->Phi[13]*f->P[3][10] + t->Phi[14]*f->P[4][10] + t->Phi[15]*f->P[5][10] +
-            t->Phi[16]*f->P[7][10] + t->Phi[17]*f->P[8][10] + t->Phi[18]*f->P[9][10] +
-            t->Phi[19]*f->P[10][10];
-    w->M[11] = t->Phi[10]*f->P[0][11] + t->Phi[11]*f->P[1][11] + t->Phi[12]*f->P[2][11] +
-            t->Phi[13]*f->P[3][11] + t->Phi[14]*f->P[4][11] + t->Phi[15]*f->P[5][11] +
-            t->Phi[16]*f->P[7][11] + t->Phi[17]*f->P[8][11] + t->Phi[18]*f->P[9][11] +
-            t->Phi[19]*f->P[10][11];
+    int c;
+    lane_pair b[10];
+    b[0] = lane_pair_of(t->Phi[10], t->Phi[10]);
+    b[1] = lane_pair_of(t->Phi[11], t->Phi[11]);
+    b[2] = lane_pair_of(t->Phi[12], t->Phi[12]);
+    b[3] = lane_pair_of(t->Phi[13], t->Phi[13]);
+    b[4] = lane_pair_of(t->Phi[14], t->Phi[14]);
+    b[5] = lane_pair_of(t->Phi[15], t->Phi[15]);
+    b[6] = lane_pair_of(t->Phi[16], t->Phi[16]);
+    b[7] = lane_pair_of(t->Phi[17], t->Phi[17]);
+    b[8] = lane_pair_of(t->Phi[18], t->Phi[18]);
+    b[9] = lane_pair_of(t->Phi[19], t->Phi[19]);
+    for (c = 0; c + 1 < 13; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[12] = t->Phi[10]*f->P[0][12] + t->Phi[11]*f->P[1][12] + t->Phi[12]*f->P[2][12] +
             t->Phi[13]*f->P[3][12] + t->Phi[14]*f->P[4][12] + t->Phi[15]*f->P[5][12] +
             t->Phi[16]*f->P[7][12] + t->Phi[17]*f->P[8][12] + t->Phi[18]*f->P[9][12] +
@@ -2202,54 +2295,31 @@ NED_DOPPLER13_REDUCED_BLOCK void phi_times_p_row_2(const ned_doppler13_reduced_f
         const ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[20]*f->P[0][0] + t->Phi[21]*f->P[1][0] + t->Phi[22]*f->P[2][0] +
-            t->Phi[23]*f->P[3][0] + t->Phi[24]*f->P[4][0] + t->Phi[25]*f->P[5][0] +
-            t->Phi[26]*f->P[7][0] + t->Phi[27]*f->P[8][0] + t->Phi[28]*f->P[9][0] +
-            t->Phi[29]*f->P[10][0];
-    w->M[1] = t->Phi[20]*f->P[0][1] + t->Phi[21]*f->P[1][1] + t->Phi[22]*f->P[2][1] +
-            t->Phi[23]*f->P[3][1] + t->Phi[24]*f->P[4][1] + t->Phi[25]*f->P[5][1] +
-            t->Phi[26]*f->P[7][1] + t->Phi[27]*f->P[8][1] + t->Phi[28]*f->P[9][1] +
-            t->Phi[29]*f->P[10][1];
-    w->M[2] = t->Phi[20]*f->P[0][2] + t->Phi[21]*f->P[1][2] + t->Phi[22]*f->P[2][2] +
-            t->Phi[23]*f->P[3][2] + t->Phi[24]*f->P[4][2] + t->Phi[25]*f->P[5][2] +
-            t->Phi[26]*f->P[7][2] + t->Phi[27]*f->P[8][2] + t->Phi[28]*f->P[9][2] +
-            t->Phi[29]*f->P[10][2];
-    w->M[3] = t->Phi[20]*f->P[0][3] + t->Phi[21]*f->P[1][3] + t->Phi[22]*f->P[2][3] +
-            t->Phi[23]*f->P[3][3] + t->Phi[24]*f->P[4][3] + t->Phi[25]*f->P[5][3] +
-            t->Phi[26]*f->P[7][3] + t->Phi[27]*f->P[8][3] + t->Phi[28]*f->P[9][3] +
-            t->Phi[29]*f->P[10][3];
-    w->M[4] = t->Phi[20]*f->P[0][4] + t->Phi[21]*f->P[1][4] + t->Phi[22]*f->P[2][4] +
-            t->Phi[23]*f->P[3][4] + t->Phi[24]*f->P[4][4] + t->Phi[25]*f->P[5][4] +
-            t->Phi[26]*f->P[7][4] + t->Phi[27]*f->P[8][4] + t->Phi[28]*f->P[9][4] +
-            t->Phi[29]*f->P[10][4];
-    w->M[5] = t->Phi[20]*f->P[0][5] + t->Phi[21]*f->P[1][5] + t->Phi[22]*f->P[2][5] +
-            t->Phi[23]*f->P[3][5] + t->Phi[24]*f->P[4][5] + t->Phi[25]*f->P[5][5] +
-            t->Phi[26]*f->P[7][5] + t->Phi[27]*f->P[8][5] + t->Phi[28]*f->P[9][5] +
-            t->Phi[29]*f->P[10][5];
-    w->M[6] = t->Phi[20]*f->P[0][6] + t->Phi[21]*f->P[1][6] + t->Phi[22]*f->P[2][6] +
-            t->Phi[23]*f->P[3][6] + t->Phi[24]*f->P[4][6] + t->Phi[25]*f->P[5][6] +
-            t->Phi[26]*f->P[7][6] + t->Phi[27]*f->P[8][6] + t->Phi[28]*f->P[9][6] +
-            t->Phi[29]*f->P[10][6];
-    w->M[7] = t->Phi[20]*f->P[0][7] + t->Phi[21]*f->P[1][7] + t->Phi[22]*f->P[2][7] +
-            t->Phi[23]*f->P[3][7] + t->Phi[24]*f->P[4][7] + t->Phi[25]*f->P[5][7] +
-            t->Phi[26]*f->P[7][7] + t->Phi[27]*f->P[8][7] + t->Phi[28]*f->P[9][7] +
-            t->Phi[29]*f->P[10][7];
-    w->M[8] = t->Phi[20]*f->P[0][8] + t->Phi[21]*f->P[1][8] + t->Phi[22]*f->P[2][8] +
-            t->Phi[23]*f->P[3][8] + t->Phi[24]*f->P[4][8] + t->Phi[25]*f->P[5][8] +
-            t->Phi[26]*f->P[7][8] + t->Phi[27]*f->P[8][8] + t->Phi[28]*f->P[9][8] +
-            t->Phi[29]*f->P[10][8];
-    w->M[9] = t->Phi[20]*f->P[0][9] + t->Phi[21]*f->P[1][9] + t->Phi[22]*f->P[2][9] +
-            t->Phi[23]*f->P[3][9] + t->Phi[24]*f->P[4][9] + t->Phi[25]*f->P[5][9] +
-            t->Phi[26]*f->P[7][9] + t->Phi[27]*f->P[8][9] + t->Phi[28]*f->P[9][9] +
-            t->Phi[29]*f->P[10][9];
-    w->M[10] = t->Phi[20]*f->P[0][10] + t->Phi[21]*f->P[1][10] + t->Phi[22]*f->P[2][10] +
-            t->Phi[23]*f->P[3][10] + t->Phi[24]*f->P[4][10] + t->Phi[25]*f->P[5][10] +
-            t->Phi[26]*f->P[7][10] + t->Phi[27]*f->P[8][10] + t->Phi[28]*f->P[9][10] +
-            t->Phi[29]*f->P[10][10];
-    w->M[11] = t->Phi[20]*f->P[0][11] + t->Phi[21]*f->P[1][11] + t->Phi[22]*f->P[2][11] +
-            t->Phi[23]*f->P[3][11] + t->Phi[24]*f->P[4][11] + t->Phi[25]*f->P[5][11] +
-            t->Phi[26]*f->P[7][11] + t->Phi[27]*f->P[8][11] + t->Phi[28]*f->P[9][11] +
-            t->Phi[29]*f->P[10][11];
+    int c;
+    lane_pair b[10];
+    b[0] = lane_pair_of(t->Phi[20], t->Phi[20]);
+    b[1] = lane_pair_of(t->Phi[21], t->Phi[21]);
+    b[2] = lane_pair_of(t->Phi[22], t->Phi[22]);
+    b[3] = lane_pair_of(t->Phi[23], t->Phi[23]);
+    b[4] = lane_pair_of(t->Phi[24], t->Phi[24]);
+    b[5] = lane_pair_of(t->Phi[25], t->Phi[25]);
+    b[6] = lane_pair_of(t->Phi[26], t->Phi[26]);
+    b[7] = lane_pair_of(t->Phi[27], t->Phi[27]);
+    b[8] = lane_pair_of(t->Phi[28], t->Phi[28]);
+    b[9] = lane_pair_of(t->Phi[29], t->Phi[29]);
+    for (c = 0; c + 1 < 13; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[12] = t->Phi[20]*f->P[0][12] + t->Phi[21]*f->P[1][12] + t->Phi[22]*f->P[2][12] +
             t->Phi[23]*f->P[3][12] + t->Phi[24]*f->P[4][12] + t->Phi[25]*f->P[5][12] +
             t->Phi[26]*f->P[7][12] + t->Phi[27]*f->P[8][12] + t->Phi[28]*f->P[9][12] +
@@ -2307,54 +2377,31 @@ NED_DOPPLER13_REDUCED_BLOCK void phi_times_p_row_3(const ned_doppler13_reduced_f
         const ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[30]*f->P[0][0] + t->Phi[31]*f->P[1][0] + t->Phi[32]*f->P[2][0] +
-            t->Phi[33]*f->P[3][0] + t->Phi[34]*f->P[4][0] + t->Phi[35]*f->P[5][0] +
-            t->Phi[36]*f->P[7][0] + t->Phi[37]*f->P[8][0] + t->Phi[38]*f->P[9][0] +
-            t->Phi[39]*f->P[10][0];
-    w->M[1] = t->Phi[30]*f->P[0][1] + t->Phi[31]*f->P[1][1] + t->Phi[32]*f->P[2][1] +
-            t->Phi[33]*f->P[3][1] + t->Phi[34]*f->P[4][1] + t->Phi[35]*f->P[5][1] +
-            t->Phi[36]*f->P[7][1] + t->Phi[37]*f->P[8][1] + t->Phi[38]*f->P[9][1] +
-            t->Phi[39]*f->P[10][1];
-    w->M[2] = t->Phi[30]*f->P[0][2] + t->Phi[31]*f->P[1][2] + t->Phi[32]*f->P[2][2] +
-            t->Phi[33]*f->P[3][2] + t->Phi[34]*f->P[4][2] + t->Phi[35]*f->P[5][2] +
-            t->Phi[36]*f->P[7][2] + t->Phi[37]*f->P[8][2] + t->Phi[38]*f->P[9][2] +
-            t->Phi[39]*f->P[10][2];
-    w->M[3] = t->Phi[30]*f->P[0][3] + t->Phi[31]*f->P[1][3] + t->Phi[32]*f->P[2][3] +
-            t->Phi[33]*f->P[3][3] + t->Phi[34]*f->P[4][3] + t->Phi[35]*f->P[5][3] +
-            t->Phi[36]*f->P[7][3] + t->Phi[37]*f->P[8][3] + t->Phi[38]*f->P[9][3] +
-            t->Phi[39]*f->P[10][3];
-    w->M[4] = t->Phi[30]*f->P[0][4] + t->Phi[31]*f->P[1][4] + t->Phi[32]*f->P[2][4] +
-            t->Phi[33]*f->P[3][4] + t->Phi[34]*f->P[4][4] + t->Phi[35]*f->P[5][4] +
-            t->Phi[36]*f->P[7][4] + t->Phi[37]*f->P[8][4] + t->Phi[38]*f->P[9][4] +
-            t->Phi[39]*f->P[10][4];
-    w->M[5] = t->Phi[30]*f->P[0][5] + t->Phi[31]*f->P[1][5] + t->Phi[32]*f->P[2][5] +
-            t->Phi[33]*f->P[3][5] + t->Phi[34]*f->P[4][5] + t->Phi[35]*f->P[5][5] +
-            t->Phi[36]*f->P[7][5] + t->Phi[37]*f->P[8][5] + t->Phi[38]*f->P[9][5] +
-            t->Phi[39]*f->P[10][5];
-    w->M[6] = t->Phi[30]*f->P[0][6] + t->Phi[31]*f->P[1][6] + t->Phi[32]*f->P[2][6] +
-            t->Phi[33]*f->P[3][6] + t->Phi[34]*f->P[4][6] + t->Phi[35]*f->P[5][6] +
-            t->Phi[36]*f->P[7][6] + t->Phi[37]*f->P[8][6] + t->Phi[38]*f->P[9][6] +
-            t->Phi[39]*f->P[10][6];
-    w->M[7] = t->Phi[30]*f->P[0][7] + t->Phi[31]*f->P[1][7] + t->Phi[32]*f->P[2][7] +
-            t->Phi[33]*f->P[3][7] + t->Phi[34]*f->P[4][7] + t->Phi[35]*f->P[5][7] +
-            t->Phi[36]*f->P[7][7] + t->Phi[37]*f->P[8][7] + t->Phi[38]*f->P[9][7] +
-            t->Phi[39]*f->P[10][7];
-    w->M[8] = t->Phi[30]*f->P[0][8] + t->Phi[31]*f->P[1][8] + t->Phi[32]*f->P[2][8] +
-            t->Phi[33]*f->P[3][8] + t->Phi[34]*f->P[4][8] + t->Phi[35]*f->P[5][8] +
-            t->Phi[36]*f->P[7][8] + t->Phi[37]*f->P[8][8] + t->Phi[38]*f->P[9][8] +
-            t->Phi[39]*f->P[10][8];
-    w->M[9] = t->Phi[30]*f->P[0][9] + t->Phi[31]*f->P[1][9] + t->Phi[32]*f->P[2][9] +
-            t->Phi[33]*f->P[3][9] + t->Phi[34]*f->P[4][9] + t->Phi[35]*f->P[5][9] +
-            t->Phi[36]*f->P[7][9] + t->Phi[37]*f->P[8][9] + t->Phi[38]*f->P[9][9] +
-            t->Phi[39]*f->P[10][9];
-    w->M[10] = t->Phi[30]*f->P[0][10] + t->Phi[31]*f->P[1][10] + t->Phi[32]*f->P[2][10] +
-            t->Phi[33]*f->P[3][10] + t->Phi[34]*f->P[4][10] + t->Phi[35]*f->P[5][10] +
-            t->Phi[36]*f->P[7][10] + t->Phi[37]*f->P[8][10] + t->Phi[38]*f->P[9][10] +
-            t->Phi[39]*f->P[10][10];
-    w->M[11] = t->Phi[30]*f->P[0][11] + t->Phi[31]*f->P[1][11] + t->Phi[32]*f->P[2][11] +
-            t->Phi[33]*f->P[3][11] + t->Phi[34]*f->P[4][11] + t->Phi[35]*f->P[5][11] +
-            t->Phi[36]*f->P[7][11] + t->Phi[37]*f->P[8][11] + t->Phi[38]*f->P[9][11] +
-            t->Phi[39]*f->P[10][11];
+    int c;
+    lane_pair b[10];
+    b[0] = lane_pair_of(t->Phi[30], t->Phi[30]);
+    b[1] = lane_pair_of(t->Phi[31], t->Phi[31]);
+    b[2] = lane_pair_of(t->Phi[32], t->Phi[32]);
+    b[3] = lane_pair_of(t->Phi[33], t->Phi[33]);
+    b[4] = lane_pair_of(t->Phi[34], t->Phi[34]);
+    b[5] = lane_pair_of(t->Phi[35], t->Phi[35]);
+    b[6] = lane_pair_of(t->Phi[36], t->Phi[36]);
+    b[7] = lane_pair_of(t->Phi[37], t->Phi[37]);
+    b[8] = lane_pair_of(t->Phi[38], t->Phi[38]);
+    b[9] = lane_pair_of(t->Phi[39], t->Phi[39]);
+    for (c = 0; c + 1 < 13; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[12] = t->Phi[30]*f->P[0][12] + t->Phi[31]*f->P[1][12] + t->Phi[32]*f->P[2][12] +
             t->Phi[33]*f->P[3][12] + t->Phi[34]*f->P[4][12] + t->Phi[35]*f->P[5][12] +
             t->Phi[36]*f->P[7][12] + t->Phi[37]*f->P[8][12] + t->Phi[38]*f->P[9][12] +
@@ -2406,54 +2453,31 @@ NED_DOPPLER13_REDUCED_BLOCK void phi_times_p_row_4(const ned_doppler13_reduced_f
         const ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[40]*f->P[0][0] + t->Phi[41]*f->P[1][0] + t->Phi[42]*f->P[2][0] +
-            t->Phi[43]*f->P[3][0] + t->Phi[44]*f->P[4][0] + t->Phi[45]*f->P[5][0] +
-            t->Phi[46]*f->P[7][0] + t->Phi[47]*f->P[8][0] + t->Phi[48]*f->P[9][0] +
-            t->Phi[49]*f->P[10][0];
-    w->M[1] = t->Phi[40]*f->P[0][1] + t->Phi[41]*f->P[1][1] + t->Phi[42]*f->P[2][1] +
-            t->Phi[43]*f->P[3][1] + t->Phi[44]*f->P[4][1] + t->Phi[45]*f->P[5][1] +
-            t->Phi[46]*f->P[7][1] + t->Phi[47]*f->P[8][1] + t->Phi[48]*f->P[9][1] +
-            t->Phi[49]*f->P[10][1];
-    w->M[2] = t->Phi[40]*f->P[0][2] + t->Phi[41]*f->P[1][2] + t->Phi[42]*f->P[2][2] +
-            t->Phi[43]*f->P[3][2] + t->Phi[44]*f->P[4][2] + t->Phi[45]*f->P[5][2] +
-            t->Phi[46]*f->P[7][2] + t->Phi[47]*f->P[8][2] + t->Phi[48]*f->P[9][2] +
-            t->Phi[49]*f->P[10][2];
-    w->M[3] = t->Phi[40]*f->P[0][3] + t->Phi[41]*f->P[1][3] + t->Phi[42]*f->P[2][3] +
-            t->Phi[43]*f->P[3][3] + t->Phi[44]*f->P[4][3] + t->Phi[45]*f->P[5][3] +
-            t->Phi[46]*f->P[7][3] + t->Phi[47]*f->P[8][3] + t->Phi[48]*f->P[9][3] +
-            t->Phi[49]*f->P[10][3];
-    w->M[4] = t->Phi[40]*f->P[0][4] + t->Phi[41]*f->P[1][4] + t->Phi[42]*f->P[2][4] +
-            t->Phi[43]*f->P[3][4] + t->Phi[44]*f->P[4][4] + t->Phi[45]*f->P[5][4] +
-            t->Phi[46]*f->P[7][4] + t->Phi[47]*f->P[8][4] + t->Phi[48]*f->P[9][4] +
-            t->Phi[49]*f->P[10][4];
-    w->M[5] = t->Phi[40]*f->P[0][5] + t->Phi[41]*f->P[1][5] + t->Phi[42]*f->P[2][5] +
-            t->Phi[43]*f->P[3][5] + t->Phi[44]*f->P[4][5] + t->Phi[45]*f->P[5][5] +
-            t->Phi[46]*f->P[7][5] + t->Phi[47]*f->P[8][5] + t->Phi[48]*f->P[9][5] +
-            t->Phi[49]*f->P[10][5];
-    w->M[6] = t->Phi[40]*f->P[0][6] + t->Phi[41]*f->P[1][6] + t->Phi[42]*f->P[2][6] +
-            t->Phi[43]*f->P[3][6] + t->Phi[44]*f->P[4][6] + t->Phi[45]*f->P[5][6] +
-            t->Phi[46]*f->P[7][6] + t->Phi[47]*f->P[8][6] + t->Phi[48]*f->P[9][6] +
-            t->Phi[49]*f->P[10][6];
-    w->M[7] = t->Phi[40]*f->P[0][7] + t->Phi[41]*f->P[1][7] + t->Phi[42]*f->P[2][7] +
-            t->Phi[43]*f->P[3][7] + t->Phi[44]*f->P[4][7] + t->Phi[45]*f->P[5][7] +
-            t->Phi[46]*f->P[7][7] + t->Phi[47]*f->P[8][7] + t->Phi[48]*f->P[9][7] +
-            t->Phi[49]*f->P[10][7];
-    w->M[8] = t->Phi[40]*f->P[0][8] + t->Phi[41]*f->P[1][8] + t->Phi[42]*f->P[2][8] +
-            t->Phi[43]*f->P[3][8] + t->Phi[44]*f->P[4][8] + t->Phi[45]*f->P[5][8] +
-            t->Phi[46]*f->P[7][8] + t->Phi[47]*f->P[8][8] + t->Phi[48]*f->P[9][8] +
-            t->Phi[49]*f->P[10][8];
-    w->M[9] = t->Phi[40]*f->P[0][9] + t->Phi[41]*f->P[1][9] + t->Phi[42]*f->P[2][9] +
-            t->Phi[43]*f->P[3][9] + t->Phi[44]*f->P[4][9] + t->Phi[45]*f->P[5][9] +
-            t->Phi[46]*f->P[7][9] + t->Phi[47]*f->P[8][9] + t->Phi[48]*f->P[9][9] +
-            t->Phi[49]*f->P[10][9];
-    w->M[10] = t->Phi[40]*f->P[0][10] + t->Phi[41]*f->P[1][10] + t->Phi[42]*f->P[2][10] +
-            t->Phi[43]*f->P[3][10] + t->Phi[44]*f->P[4][10] + t->Phi[45]*f->P[5][10] +
-            t->Phi[46]*f->P[7][10] + t->Phi[47]*f->P[8][10] + t->Phi[48]*f->P[9][10] +
-            t->Phi[49]*f->P[10][10];
-    w->M[11] = t->Phi[40]*f->P[0][11] + t->Phi[41]*f->P[1][11] + t->Phi[42]*f->P[2][11] +
-            t->Phi[43]*f->P[3][11] + t->Phi[44]*f->P[4][11] + t->Phi[45]*f->P[5][11] +
-            t->Phi[46]*f->P[7][11] + t->Phi[47]*f->P[8][11] + t->Phi[48]*f->P[9][11] +
-            t->Phi[49]*f->P[10][11];
+    int c;
+    lane_pair b[10];
+    b[0] = lane_pair_of(t->Phi[40], t->Phi[40]);
+    b[1] = lane_pair_of(t->Phi[41], t->Phi[41]);
+    b[2] = lane_pair_of(t->Phi[42], t->Phi[42]);
+    b[3] = lane_pair_of(t->Phi[43], t->Phi[43]);
+    b[4] = lane_pair_of(t->Phi[44], t->Phi[44]);
+    b[5] = lane_pair_of(t->Phi[45], t->Phi[45]);
+    b[6] = lane_pair_of(t->Phi[46], t->Phi[46]);
+    b[7] = lane_pair_of(t->Phi[47], t->Phi[47]);
+    b[8] = lane_pair_of(t->Phi[48], t->Phi[48]);
+    b[9] = lane_pair_of(t->Phi[49], t->Phi[49]);
+    for (c = 0; c + 1 < 13; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[12] = t->Phi[40]*f->P[0][12] + t->Phi[41]*f->P[1][12] + t->Phi[42]*f->P[2][12] +
             t->Phi[43]*f->P[3][12] + t->Phi[44]*f->P[4][12] + t->Phi[45]*f->P[5][12] +
             t->Phi[46]*f->P[7][12] + t->Phi[47]*f->P[8][12] + t->Phi[48]*f->P[9][12] +
@@ -2499,54 +2523,31 @@ NED_DOPPLER13_REDUCED_BLOCK void phi_times_p_row_5(const ned_doppler13_reduced_f
         const ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[50]*f->P[0][0] + t->Phi[51]*f->P[1][0] + t->Phi[52]*f->P[2][0] +
-            t->Phi[53]*f->P[3][0] + t->Phi[54]*f->P[4][0] + t->Phi[55]*f->P[5][0] +
-            t->Phi[56]*f->P[7][0] + t->Phi[57]*f->P[8][0] + t->Phi[58]*f->P[9][0] +
-            t->Phi[59]*f->P[10][0];
-    w->M[1] = t->Phi[50]*f->P[0][1] + t->Phi[51]*f->P[1][1] + t->Phi[52]*f->P[2][1] +
-            t->Phi[53]*f->P[3][1] + t->Phi[54]*f->P[4][1] + t->Phi[55]*f->P[5][1] +
-            t->Phi[56]*f->P[7][1] + t->Phi[57]*f->P[8][1] + t->Phi[58]*f->P[9][1] +
-            t->Phi[59]*f->P[10][1];
-    w->M[2] = t->Phi[50]*f->P[0][2] + t->Phi[51]*f->P[1][2] + t->Phi[52]*f->P[2][2] +
-            t->Phi[53]*f->P[3][2] + t->Phi[54]*f->P[4][2] + t->Phi[55]*f->P[5][2] +
-            t->Phi[56]*f->P[7][2] + t->Phi[57]*f->P[8][2] + t->Phi[58]*f->P[9][2] +
-            t->Phi[59]*f->P[10][2];
-    w->M[3] = t->Phi[50]*f->P[0][3] + t->Phi[51]*f->P[1][3] + t->Phi[52]*f->P[2][3] +
-            t->Phi[53]*f->P[3][3] + t->Phi[54]*f->P[4][3] + t->Phi[55]*f->P[5][3] +
-            t->Phi[56]*f->P[7][3] + t->Phi[57]*f->P[8][3] + t->Phi[58]*f->P[9][3] +
-            t->Phi[59]*f->P[10][3];
-    w->M[4] = t->Phi[50]*f->P[0][4] + t->Phi[51]*f->P[1][4] + t->Phi[52]*f->P[2][4] +
-            t->Phi[53]*f->P[3][4] + t->Phi[54]*f->P[4][4] + t->Phi[55]*f->P[5][4] +
-            t->Phi[56]*f->P[7][4] + t->Phi[57]*f->P[8][4] + t->Phi[58]*f->P[9][4] +
-            t->Phi[59]*f->P[10][4];
-    w->M[5] = t->Phi[50]*f->P[0][5] + t->Phi[51]*f->P[1][5] + t->Phi[52]*f->P[2][5] +
-            t->Phi[53]*f->P[3][5] + t->Phi[54]*f->P[4][5] + t->Phi[55]*f->P[5][5] +
-            t->Phi[56]*f->P[7][5] + t->Phi[57]*f->P[8][5] + t->Phi[58]*f->P[9][5] +
-            t->Phi[59]*f->P[10][5];
-    w->M[6] = t->Phi[50]*f->P[0][6] + t->Phi[51]*f->P[1][6] + t->Phi[52]*f->P[2][6] +
-            t->Phi[53]*f->P[3][6] + t->Phi[54]*f->P[4][6] + t->Phi[55]*f->P[5][6] +
-            t->Phi[56]*f->P[7][6] + t->Phi[57]*f->P[8][6] + t->Phi[58]*f->P[9][6] +
-            t->Phi[59]*f->P[10][6];
-    w->M[7] = t->Phi[50]*f->P[0][7] + t->Phi[51]*f->P[1][7] + t->Phi[52]*f->P[2][7] +
-            t->Phi[53]*f->P[3][7] + t->Phi[54]*f->P[4][7] + t->Phi[55]*f->P[5][7] +
-            t->Phi[56]*f->P[7][7] + t->Phi[57]*f->P[8][7] + t->Phi[58]*f->P[9][7] +
-            t->Phi[59]*f->P[10][7];
-    w->M[8] = t->Phi[50]*f->P[0][8] + t->Phi[51]*f->P[1][8] + t->Phi[52]*f->P[2][8] +
-            t->Phi[53]*f->P[3][8] + t->Phi[54]*f->P[4][8] + t->Phi[55]*f->P[5][8] +
-            t->Phi[56]*f->P[7][8] + t->Phi[57]*f->P[8][8] + t->Phi[58]*f->P[9][8] +
-            t->Phi[59]*f->P[10][8];
-    w->M[9] = t->Phi[50]*f->P[0][9] + t->Phi[51]*f->P[1][9] + t->Phi[52]*f->P[2][9] +
-            t->Phi[53]*f->P[3][9] + t->Phi[54]*f->P[4][9] + t->Phi[55]*f->P[5][9] +
-            t->Phi[56]*f->P[7][9] + t->Phi[57]*f->P[8][9] + t->Phi[58]*f->P[9][9] +
-            t->Phi[59]*f->P[10][9];
-    w->M[10] = t->Phi[50]*f->P[0][10] + t->Phi[51]*f->P[1][10] + t->Phi[52]*f->P[2][10] +
-            t->Phi[53]*f->P[3][10] + t->Phi[54]*f->P[4][10] + t->Phi[55]*f->P[5][10] +
-            t->Phi[56]*f->P[7][10] + t->Phi[57]*f->P[8][10] + t->Phi[58]*f->P[9][10] +
-            t->Phi[59]*f->P[10][10];
-    w->M[11] = t->Phi[50]*f->P[0][11] + t->Phi[51]*f->P[1][11] + t->Phi[52]*f->P[2][11] +
-            t->Phi[53]*f->P[3][11] + t->Phi[54]*f->P[4][11] + t->Phi[55]*f->P[5][11] +
-            t->Phi[56]*f->P[7][11] + t->Phi[57]*f->P[8][11] + t->Phi[58]*f->P[9][11] +
-            t->Phi[59]*f->P[10][11];
+    int c;
+    lane_pair b[10];
+    b[0] = lane_pair_of(t->Phi[50], t->Phi[50]);
+    b[1] = lane_pair_of(t->Phi[51], t->Phi[51]);
+    b[2] = lane_pair_of(t->Phi[52], t->Phi[52]);
+    b[3] = lane_pair_of(t->Phi[53], t->Phi[53]);
+    b[4] = lane_pair_of(t->Phi[54], t->Phi[54]);
+    b[5] = lane_pair_of(t->Phi[55], t->Phi[55]);
+    b[6] = lane_pair_of(t->Phi[56], t->Phi[56]);
+    b[7] = lane_pair_of(t->Phi[57], t->Phi[57]);
+    b[8] = lane_pair_of(t->Phi[58], t->Phi[58]);
+    b[9] = lane_pair_of(t->Phi[59], t->Phi[59]);
+    for (c = 0; c + 1 < 13; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[12] = t->Phi[50]*f->P[0][12] + t->Phi[51]*f->P[1][12] + t->Phi[52]*f->P[2][12] +
             t->Phi[53]*f->P[3][12] + t->Phi[54]*f->P[4][12] + t->Phi[55]*f->P[5][12] +
             t->Phi[56]*f->P[7][12] + t->Phi[57]*f->P[8][12] + t->Phi[58]*f->P[9][12] +
@@ -2586,54 +2587,33 @@ NED_DOPPLER13_REDUCED_BLOCK void phi_times_p_row_6(const ned_doppler13_reduced_f
         const ned_doppler13_reduced_transition *restrict t, ned_doppler13_reduced_filter_scratch
         *restrict w)
 {
-    w->M[0] = t->Phi[60]*f->P[0][0] + t->Phi[61]*f->P[1][0] + t->Phi[62]*f->P[2][0] +
-            t->Phi[63]*f->P[3][0] + t->Phi[64]*f->P[4][0] + t->Phi[65]*f->P[5][0] +
-            t->Phi[66]*f->P[6][0] + t->Phi[67]*f->P[7][0] + t->Phi[68]*f->P[8][0] +
-            t->Phi[69]*f->P[9][0] + t->Phi[70]*f->P[10][0];
-    w->M[1] = t->Phi[60]*f->P[0][1] + t->Phi[61]*f->P[1][1] + t->Phi[62]*f->P[2][1] +
-            t->Phi[63]*f->P[3][1] + t->Phi[64]*f->P[4][1] + t->Phi[65]*f->P[5][1] +
-            t->Phi[66]*f->P[6][1] + t->Phi[67]*f->P[7][1] + t->Phi[68]*f->P[8][1] +
-            t->Phi[69]*f->P[9][1] + t->Phi[70]*f->P[10][1];
-    w->M[2] = t->Phi[60]*f->P[0][2] + t->Phi[61]*f->P[1][2] + t->Phi[62]*f->P[2][2] +
-            t->Phi[63]*f->P[3][2] + t->Phi[64]*f->P[4][2] + t->Phi[65]*f->P[5][2] +
-            t->Phi[66]*f->P[6][2] + t->Phi[67]*f->P[7][2] + t->Phi[68]*f->P[8][2] +
-            t->Phi[69]*f->P[9][2] + t->Phi[70]*f->P[10][2];
-    w->M[3] = t->Phi[60]*f->P[0][3] + t->Phi[61]*f->P[1][3] + t->Phi[62]*f->P[2][3] +
-            t->Phi[63]*f->P[3][3] + t->Phi[64]*f->P[4][3] + t->Phi[65]*f->P[5][3] +
-            t->Phi[66]*f->P[6][3] + t->Phi[67]*f->P[7][3] + t->Phi[68]*f->P[8][3] +
-            t->Phi[69]*f->P[9][3] + t->Phi[70]*f->P[10][3];
-    w->M[4] = t->Phi[60]*f->P[0][4] + t->Phi[61]*f->P[1][4] + t->Phi[62]*f->P[2][4] +
-            t->Phi[63]*f->P[3][4] + t->Phi[64]*f->P[4][4] + t->Phi[65]*f->P[5][4] +
-            t->Phi[66]*f->P[6][4] + t->Phi[67]*f->P[7][4] + t->Phi[68]*f->P[8][4] +
-            t->Phi[69]*f->P[9][4] + t->Phi[70]*f->P[10][4];
-    w->M[5] = t->Phi[60]*f->P[0][5] + t->Phi[61]*f->P[1][5] + t->Phi[62]*f->P[2][5] +
-            t->Phi[63]*f->P[3][5] + t->Phi[64]*f->P[4][5] + t->Phi[65]*f->P[5][5] +
-            t->Phi[66]*f->P[6][5] + t->Phi[67]*f->P[7][5] + t->Phi[68]*f->P[8][5] +
-            t->Phi[69]*f->P[9][5] + t->Phi[70]*f->P[10][5];
-    w->M[6] = t->Phi[60]*f->P[0][6] + t->Phi[61]*f->P[1][6] + t->Phi[62]*f->P[2][6] +
-            t->Phi[63]*f->P[3][6] + t->Phi[64]*f->P[4][6] + t->Phi[65]*f->P[5][6] +
-            t->Phi[66]*f->P[6][6] + t->Phi[67]*f->P[7][6] + t->Phi[68]*f->P[8][6] +
-            t->Phi[69]*f->P[9][6] + t->Phi[70]*f->P[10][6];
-    w->M[7] = t->Phi[60]*f->P[0][7] + t->Phi[61]*f->P[1][7] + t->Phi[62]*f->P[2][7] +
-            t->Phi[63]*f->P[3][7] + t->Phi[64]*f->P[4][7] + t->Phi[65]*f->P[5][7] +
-            t->Phi[66]*f->P[6][7] + t->Phi[67]*f->P[7][7] + t->Phi[68]*f->P[8][7] +
-            t->Phi[69]*f->P[9][7] + t->Phi[70]*f->P[10][7];
-    w->M[8] = t->Phi[60]*f->P[0][8] + t->Phi[61]*f->P[1][8] + t->Phi[62]*f->P[2][8] +
-            t->Phi[63]*f->P[3][8] + t->Phi[64]*f->P[4][8] + t->Phi[65]*f->P[5][8] +
-            t->Phi[66]*f->P[6][8] + t->Phi[67]*f->P[7][8] + t->Phi[68]*f->P[8][8] +
-            t->Phi[69]*f->P[9][8] + t->Phi[70]*f->P[10][8];
-    w->M[9] = t->Phi[60]*f->P[0][9] + t->Phi[61]*f->P[1][9] + t->Phi[62]*f->P[2][9] +
-            t->Phi[63]*f->P[3][9] + t->Phi[64]*f->P[4][9] + t->Phi[65]*f->P[5][9] +
-            t->Phi[66]*f->P[6][9] + t->Phi[67]*f->P[7][9] + t->Phi[68]*f->P[8][9] +
-            t->Phi[69]*f->P[9][9] + t->Phi[70]*f->P[10][9];
-    w->M[10] = t->Phi[60]*f->P[0][10] + t->Phi[61]*f->P[1][10] + t->Phi[62]*f->P[2][10] +
-            t->Phi[63]*f->P[3][10] + t->Phi[64]*f->P[4][10] + t->Phi[65]*f->P[5][10] +
-            t->Phi[66]*f->P[6][10] + t->Phi[67]*f->P[7][10] + t->Phi[68]*f->P[8][10] +
-            t->Phi[69]*f->P[9][10] + t->Phi[70]*f->P[10][10];
-    w->M[11] = t->Phi[60]*f->P[0][11] + t->Phi[61]*f->P[1][11] + t->Phi[62]*f->P[2][11] +
-            t->Phi[63]*f->P[3][11] + t->Phi[64]*f->P[4][11] + t->Phi[65]*f->P[5][11] +
-            t->Phi[66]*f->P[6][11] + t->Phi[67]*f->P[7][11] + t->Phi[68]*f->P[8][11] +
-            t->Phi[69]*f->P[9][11] + t->Phi[70]*f->P[10][11];
+    int c;
+    lane_pair b[11];
+    b[0] = lane_pair_of(t->Phi[60], t->Phi[60]);
+    b[1] = lane_pair_of(t->Phi[61], t->Phi[61]);
+    b[2] = lane_pair_of(t->Phi[62], t->Phi[62]);
+    b[3] = lane_pair_of(t->Phi[63], t->Phi[63]);
+    b[4] = lane_pair_of(t->Phi[64], t->Phi[64]);
+    b[5] = lane_pair_of(t->Phi[65], t->Phi[65]);
+    b[6] = lane_pair_of(t->Phi[66], t->Phi[66]);
+    b[7] = lane_pair_of(t->Phi[67], t->Phi[67]);
+    b[8] = lane_pair_of(t->Phi[68], t->Phi[68]);
+    b[9] = lane_pair_of(t->Phi[69], t->Phi[69]);
+    b[10] = lane_pair_of(t->Phi[70], t->Phi[70]);
+    for (c = 0; c + 1 < 13; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[10][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
     w->M[12] = t->Phi[60]*f->P[0][12] + t->Phi[61]*f->P[1][12] + t->Phi[62]*f->P[2][12] +
             t->Phi[63]*f->P[3][12] + t->Phi[64]*f->P[4][12] + t->Phi[65]*f->P[5][12] +
             t->Phi[66]*f->P[6][12] + t->Phi[67]*f->P[7][12] + t->Phi[68]*f->P[8][12] +
@@ -2669,12 +2649,8 @@ static ned_doppler13_reduced_scalar propagate_row_7(const ned_doppler13_reduced_
         *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = f->P[7][7]; w->Pn[70] = v; check += v;
-    v = f->P[7][8]; w->Pn[71] = v; check += v;
     v = f->P[7][9]*t->Phi[73]; w->Pn[72] = v; check += v;
     v = f->P[7][10]*t->Phi[74]; w->Pn[73] = v; check += v;
-    v = f->P[7][11]; w->Pn[74] = v; check += v;
-    v = f->P[7][12]; w->Pn[75] = v; check += v;
     return check - check;
 }
 
@@ -2685,11 +2661,8 @@ static ned_doppler13_reduced_scalar propagate_row_8(const ned_doppler13_reduced_
         *restrict w)
 {
     ned_doppler13_reduced_scalar v, check = 0.0;
-    v = f->P[8][8]; w->Pn[76] = v; check += v;
     v = f->P[8][9]*t->Phi[73]; w->Pn[77] = v; check += v;
     v = f->P[8][10]*t->Phi[74]; w->Pn[78] = v; check += v;
-    v = f->P[8][11]; w->Pn[79] = v; check += v;
-    v = f->P[8][12]; w->Pn[80] = v; check += v;
     return check - check;
 }
 
@@ -2756,27 +2729,6 @@ static ned_doppler13_reduced_scalar propagate_row_10(const ned_doppler13_reduced
     return check - check;
 }
 
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ned_doppler13_reduced_scalar propagate_row_11(const ned_doppler13_reduced_filter *restrict f,
-        ned_doppler13_reduced_filter_scratch *restrict w)
-{
-    ned_doppler13_reduced_scalar v, check = 0.0;
-    v = f->P[11][11]; w->Pn[88] = v; check += v;
-    v = f->P[11][12]; w->Pn[89] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ned_doppler13_reduced_scalar propagate_row_12(const ned_doppler13_reduced_filter *restrict f,
-        ned_doppler13_reduced_filter_scratch *restrict w)
-{
-    ned_doppler13_reduced_scalar v, check = 0.0;
-    v = f->P[12][12]; w->Pn[90] = v; check += v;
-    return check - check;
-}
-
 int ned_doppler13_reduced_predict(ned_doppler13_reduced_filter *restrict f, const
         ned_doppler13_reduced_transition *restrict t,
                 ned_doppler13_reduced_workspace *restrict work)
@@ -2785,6 +2737,7 @@ int ned_doppler13_reduced_predict(ned_doppler13_reduced_filter *restrict f, cons
     ned_doppler13_reduced_scalar check = 0.0;
     modelgen_bits signs;
     ned_doppler13_reduced_scalar sum_check = 0.0;
+    ned_doppler13_reduced_scalar kept[2] = { 0.0, 0.0 }, kept_check;
     /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
     signs = modelgen_bits_of(t->Qd[0]);
     signs |= modelgen_bits_of(t->Qd[13]);
@@ -2843,17 +2796,63 @@ int ned_doppler13_reduced_predict(ned_doppler13_reduced_filter *restrict f, cons
     sum_check += propagate_row_9(t, w);
     phi_times_p_row_10(f, t, w);
     sum_check += propagate_row_10(t, w);
-    sum_check += propagate_row_11(f, w);
-    sum_check += propagate_row_12(f, w);
     /* a row's sum that is not finite: a value that is not, or an overflow of finite values */
-    if (sum_check != 0.0) {
+    if (sum_check != 0.0) { /* the entries of Pn computed (the kept pairs are not) */
         int e;
         sum_check = 0.0;
-        for (e = 0; e < NED_DOPPLER13_REDUCED_N_PACKED; ++e) {
+        for (e = 0; e < 13; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 13; e < 25; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 25; e < 36; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 36; e < 46; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 46; e < 55; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 55; e < 63; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 63; e < 70; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 72; e < 74; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 77; e < 79; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 81; e < 85; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 85; e < 88; ++e) {
             sum_check += w->Pn[e] - w->Pn[e];
         }
     }
     check += sum_check;
+    /* the pairs of random constants without noise, P_n = P there: left in P, checked finite */
+    kept[0] += f->P[11][11];
+    kept[1] += f->P[11][12];
+    kept[0] += f->P[12][12];
+    kept_check = kept[0] + kept[1];
+    if (kept_check - kept_check != 0.0) {
+        int j;
+        kept_check = 0.0;
+        for (j = 11; j < 13; ++j) {
+            kept_check += f->P[11][j] - f->P[11][j];
+        }
+        for (j = 12; j < 13; ++j) {
+            kept_check += f->P[12][j] - f->P[12][j];
+        }
+    } else {
+        kept_check = 0.0;
+    }
+    check += kept_check;
     if (check != 0.0) {
         return NED_DOPPLER13_REDUCED_ERR_NONFINITE;
     }
@@ -2937,17 +2936,12 @@ int ned_doppler13_reduced_predict(ned_doppler13_reduced_filter *restrict f, cons
     f->P[10][6] = f->P[6][10];
     f->P[11][6] = f->P[6][11];
     f->P[12][6] = f->P[6][12];
-    memcpy(&f->P[7][7], &w->Pn[70], 6 * sizeof w->Pn[0]);
-    f->P[8][7] = f->P[7][8];
+    memcpy(&f->P[7][9], &w->Pn[72], 2 * sizeof w->Pn[0]);
     f->P[9][7] = f->P[7][9];
     f->P[10][7] = f->P[7][10];
-    f->P[11][7] = f->P[7][11];
-    f->P[12][7] = f->P[7][12];
-    memcpy(&f->P[8][8], &w->Pn[76], 5 * sizeof w->Pn[0]);
+    memcpy(&f->P[8][9], &w->Pn[77], 2 * sizeof w->Pn[0]);
     f->P[9][8] = f->P[8][9];
     f->P[10][8] = f->P[8][10];
-    f->P[11][8] = f->P[8][11];
-    f->P[12][8] = f->P[8][12];
     memcpy(&f->P[9][9], &w->Pn[81], 4 * sizeof w->Pn[0]);
     f->P[10][9] = f->P[9][10];
     f->P[11][9] = f->P[9][11];
@@ -2955,9 +2949,6 @@ int ned_doppler13_reduced_predict(ned_doppler13_reduced_filter *restrict f, cons
     memcpy(&f->P[10][10], &w->Pn[85], 3 * sizeof w->Pn[0]);
     f->P[11][10] = f->P[10][11];
     f->P[12][10] = f->P[10][12];
-    memcpy(&f->P[11][11], &w->Pn[88], 2 * sizeof w->Pn[0]);
-    f->P[12][11] = f->P[11][12];
-    memcpy(&f->P[12][12], &w->Pn[90], 1 * sizeof w->Pn[0]);
     return NED_DOPPLER13_REDUCED_OK;
 }
 

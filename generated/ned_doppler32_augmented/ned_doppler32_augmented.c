@@ -1241,110 +1241,390 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_last_into_S(ned_doppler32_augmented_di
 NED_DOPPLER32_AUGMENTED_BLOCK void horner_unit_columns(ned_doppler32_augmented_discretize_scratch
         *restrict w)
 {
-    w->S[90] = w->term[1][0]*w->fh[4] + w->term[1][1]*w->fh[22] + w->term[1][2]*w->fh[41];
-    w->S[91] = w->term[1][0]*w->fh[5] + w->term[1][1]*w->fh[23] + w->term[1][2]*w->fh[42];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&w->S[90], pair);
+    }
     w->S[92] = w->term[1][0]*w->fh[6] + w->term[1][1]*w->fh[24] + w->term[1][2]*w->fh[43];
-    w->S[93] = w->term[1][0]*w->fh[10] + w->term[1][1]*w->fh[28] + w->term[1][2]*w->fh[47];
-    w->S[94] = w->term[1][0]*w->fh[11] + w->term[1][1]*w->fh[29] + w->term[1][2]*w->fh[48];
-    w->S[95] = w->term[1][0]*w->fh[12] + w->term[1][1]*w->fh[30] + w->term[1][2]*w->fh[49];
-    w->S[96] = w->term[1][0]*w->fh[13] + w->term[1][1]*w->fh[31] + w->term[1][2]*w->fh[50];
-    w->S[97] = w->term[1][0]*w->fh[14] + w->term[1][1]*w->fh[32] + w->term[1][2]*w->fh[51];
-    w->S[98] = w->term[1][0]*w->fh[15] + w->term[1][1]*w->fh[33] + w->term[1][2]*w->fh[52];
-    w->S[99] = w->term[1][0]*w->fh[16] + w->term[1][1]*w->fh[34] + w->term[1][2]*w->fh[53];
-    w->S[100] = w->term[1][0]*w->fh[17] + w->term[1][1]*w->fh[35] + w->term[1][2]*w->fh[54];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&w->S[93], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[95], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&w->S[97], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&w->S[99], pair);
+    }
     w->S[101] = w->term[1][0]*w->fh[18] + w->term[1][1]*w->fh[36] + w->term[1][2]*w->fh[55];
-    w->S[102] = w->term[1][3]*w->fh[64] + w->term[1][4]*w->fh[75];
-    w->S[103] = w->term[1][3]*w->fh[65] + w->term[1][4]*w->fh[76];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][3], w->term[1][3]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][4], w->term[1][4]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&w->S[102], pair);
+    }
     w->S[104] = w->term[1][3]*w->fh[66] + w->term[1][4]*w->fh[77];
-    w->S[105] = w->term[1][12]*w->fh[4] + w->term[1][13]*w->fh[22] + w->term[1][14]*w->fh[41];
-    w->S[106] = w->term[1][12]*w->fh[5] + w->term[1][13]*w->fh[23] + w->term[1][14]*w->fh[42];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][12], w->term[1][12]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][14], w->term[1][14]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&w->S[105], pair);
+    }
     w->S[107] = w->term[1][12]*w->fh[6] + w->term[1][13]*w->fh[24] + w->term[1][14]*w->fh[43];
-    w->S[108] = w->term[1][12]*w->fh[10] + w->term[1][13]*w->fh[28] + w->term[1][14]*w->fh[47];
-    w->S[109] = w->term[1][12]*w->fh[11] + w->term[1][13]*w->fh[29] + w->term[1][14]*w->fh[48];
-    w->S[110] = w->term[1][12]*w->fh[12] + w->term[1][13]*w->fh[30] + w->term[1][14]*w->fh[49];
-    w->S[111] = w->term[1][12]*w->fh[13] + w->term[1][13]*w->fh[31] + w->term[1][14]*w->fh[50];
-    w->S[112] = w->term[1][12]*w->fh[14] + w->term[1][13]*w->fh[32] + w->term[1][14]*w->fh[51];
-    w->S[113] = w->term[1][12]*w->fh[15] + w->term[1][13]*w->fh[33] + w->term[1][14]*w->fh[52];
-    w->S[114] = w->term[1][12]*w->fh[16] + w->term[1][13]*w->fh[34] + w->term[1][14]*w->fh[53];
-    w->S[115] = w->term[1][12]*w->fh[17] + w->term[1][13]*w->fh[35] + w->term[1][14]*w->fh[54];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][12], w->term[1][12]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][14], w->term[1][14]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&w->S[108], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][12], w->term[1][12]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][14], w->term[1][14]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[110], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][12], w->term[1][12]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][14], w->term[1][14]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&w->S[112], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][12], w->term[1][12]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][14], w->term[1][14]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&w->S[114], pair);
+    }
     w->S[116] = w->term[1][12]*w->fh[18] + w->term[1][13]*w->fh[36] + w->term[1][14]*w->fh[55];
-    w->S[117] = w->term[1][15]*w->fh[64] + w->term[1][16]*w->fh[75];
-    w->S[118] = w->term[1][15]*w->fh[65] + w->term[1][16]*w->fh[76];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][15], w->term[1][15]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][16], w->term[1][16]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&w->S[117], pair);
+    }
     w->S[119] = w->term[1][15]*w->fh[66] + w->term[1][16]*w->fh[77];
-    w->S[120] = w->term[1][24]*w->fh[4] + w->term[1][25]*w->fh[22] + w->term[1][26]*w->fh[41];
-    w->S[121] = w->term[1][24]*w->fh[5] + w->term[1][25]*w->fh[23] + w->term[1][26]*w->fh[42];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&w->S[120], pair);
+    }
     w->S[122] = w->term[1][24]*w->fh[6] + w->term[1][25]*w->fh[24] + w->term[1][26]*w->fh[43];
-    w->S[123] = w->term[1][24]*w->fh[10] + w->term[1][25]*w->fh[28] + w->term[1][26]*w->fh[47];
-    w->S[124] = w->term[1][24]*w->fh[11] + w->term[1][25]*w->fh[29] + w->term[1][26]*w->fh[48];
-    w->S[125] = w->term[1][24]*w->fh[12] + w->term[1][25]*w->fh[30] + w->term[1][26]*w->fh[49];
-    w->S[126] = w->term[1][24]*w->fh[13] + w->term[1][25]*w->fh[31] + w->term[1][26]*w->fh[50];
-    w->S[127] = w->term[1][24]*w->fh[14] + w->term[1][25]*w->fh[32] + w->term[1][26]*w->fh[51];
-    w->S[128] = w->term[1][24]*w->fh[15] + w->term[1][25]*w->fh[33] + w->term[1][26]*w->fh[52];
-    w->S[129] = w->term[1][24]*w->fh[16] + w->term[1][25]*w->fh[34] + w->term[1][26]*w->fh[53];
-    w->S[130] = w->term[1][24]*w->fh[17] + w->term[1][25]*w->fh[35] + w->term[1][26]*w->fh[54];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&w->S[123], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[125], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&w->S[127], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&w->S[129], pair);
+    }
     w->S[131] = w->term[1][24]*w->fh[18] + w->term[1][25]*w->fh[36] + w->term[1][26]*w->fh[55];
-    w->S[132] = w->term[1][27]*w->fh[64] + w->term[1][28]*w->fh[75];
-    w->S[133] = w->term[1][27]*w->fh[65] + w->term[1][28]*w->fh[76];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][27], w->term[1][27]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][28], w->term[1][28]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&w->S[132], pair);
+    }
     w->S[134] = w->term[1][27]*w->fh[66] + w->term[1][28]*w->fh[77];
-    w->S[135] = w->term[1][36]*w->fh[4] + w->term[1][37]*w->fh[22] + w->term[1][38]*w->fh[41];
-    w->S[136] = w->term[1][36]*w->fh[5] + w->term[1][37]*w->fh[23] + w->term[1][38]*w->fh[42];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][36], w->term[1][36]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][38], w->term[1][38]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&w->S[135], pair);
+    }
     w->S[137] = w->term[1][36]*w->fh[6] + w->term[1][37]*w->fh[24] + w->term[1][38]*w->fh[43];
-    w->S[138] = w->term[1][36]*w->fh[10] + w->term[1][37]*w->fh[28] + w->term[1][38]*w->fh[47];
-    w->S[139] = w->term[1][36]*w->fh[11] + w->term[1][37]*w->fh[29] + w->term[1][38]*w->fh[48];
-    w->S[140] = w->term[1][36]*w->fh[12] + w->term[1][37]*w->fh[30] + w->term[1][38]*w->fh[49];
-    w->S[141] = w->term[1][36]*w->fh[13] + w->term[1][37]*w->fh[31] + w->term[1][38]*w->fh[50];
-    w->S[142] = w->term[1][36]*w->fh[14] + w->term[1][37]*w->fh[32] + w->term[1][38]*w->fh[51];
-    w->S[143] = w->term[1][36]*w->fh[15] + w->term[1][37]*w->fh[33] + w->term[1][38]*w->fh[52];
-    w->S[144] = w->term[1][36]*w->fh[16] + w->term[1][37]*w->fh[34] + w->term[1][38]*w->fh[53];
-    w->S[145] = w->term[1][36]*w->fh[17] + w->term[1][37]*w->fh[35] + w->term[1][38]*w->fh[54];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][36], w->term[1][36]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][38], w->term[1][38]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&w->S[138], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][36], w->term[1][36]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][38], w->term[1][38]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[140], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][36], w->term[1][36]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][38], w->term[1][38]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&w->S[142], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][36], w->term[1][36]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][38], w->term[1][38]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&w->S[144], pair);
+    }
     w->S[146] = w->term[1][36]*w->fh[18] + w->term[1][37]*w->fh[36] + w->term[1][38]*w->fh[55];
-    w->S[147] = w->term[1][39]*w->fh[64] + w->term[1][40]*w->fh[75];
-    w->S[148] = w->term[1][39]*w->fh[65] + w->term[1][40]*w->fh[76];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][39], w->term[1][39]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][40], w->term[1][40]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&w->S[147], pair);
+    }
     w->S[149] = w->term[1][39]*w->fh[66] + w->term[1][40]*w->fh[77];
-    w->S[150] = w->term[1][48]*w->fh[4] + w->term[1][49]*w->fh[22] + w->term[1][50]*w->fh[41];
-    w->S[151] = w->term[1][48]*w->fh[5] + w->term[1][49]*w->fh[23] + w->term[1][50]*w->fh[42];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&w->S[150], pair);
+    }
     w->S[152] = w->term[1][48]*w->fh[6] + w->term[1][49]*w->fh[24] + w->term[1][50]*w->fh[43];
-    w->S[153] = w->term[1][48]*w->fh[10] + w->term[1][49]*w->fh[28] + w->term[1][50]*w->fh[47];
-    w->S[154] = w->term[1][48]*w->fh[11] + w->term[1][49]*w->fh[29] + w->term[1][50]*w->fh[48];
-    w->S[155] = w->term[1][48]*w->fh[12] + w->term[1][49]*w->fh[30] + w->term[1][50]*w->fh[49];
-    w->S[156] = w->term[1][48]*w->fh[13] + w->term[1][49]*w->fh[31] + w->term[1][50]*w->fh[50];
-    w->S[157] = w->term[1][48]*w->fh[14] + w->term[1][49]*w->fh[32] + w->term[1][50]*w->fh[51];
-    w->S[158] = w->term[1][48]*w->fh[15] + w->term[1][49]*w->fh[33] + w->term[1][50]*w->fh[52];
-    w->S[159] = w->term[1][48]*w->fh[16] + w->term[1][49]*w->fh[34] + w->term[1][50]*w->fh[53];
-    w->S[160] = w->term[1][48]*w->fh[17] + w->term[1][49]*w->fh[35] + w->term[1][50]*w->fh[54];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&w->S[153], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[155], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&w->S[157], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&w->S[159], pair);
+    }
     w->S[161] = w->term[1][48]*w->fh[18] + w->term[1][49]*w->fh[36] + w->term[1][50]*w->fh[55];
-    w->S[162] = w->term[1][51]*w->fh[64] + w->term[1][52]*w->fh[75];
-    w->S[163] = w->term[1][51]*w->fh[65] + w->term[1][52]*w->fh[76];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][51], w->term[1][51]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][52], w->term[1][52]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&w->S[162], pair);
+    }
     w->S[164] = w->term[1][51]*w->fh[66] + w->term[1][52]*w->fh[77];
-    w->S[165] = w->term[1][60]*w->fh[4] + w->term[1][61]*w->fh[22] + w->term[1][62]*w->fh[41];
-    w->S[166] = w->term[1][60]*w->fh[5] + w->term[1][61]*w->fh[23] + w->term[1][62]*w->fh[42];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][60], w->term[1][60]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][62], w->term[1][62]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&w->S[165], pair);
+    }
     w->S[167] = w->term[1][60]*w->fh[6] + w->term[1][61]*w->fh[24] + w->term[1][62]*w->fh[43];
-    w->S[168] = w->term[1][60]*w->fh[10] + w->term[1][61]*w->fh[28] + w->term[1][62]*w->fh[47];
-    w->S[169] = w->term[1][60]*w->fh[11] + w->term[1][61]*w->fh[29] + w->term[1][62]*w->fh[48];
-    w->S[170] = w->term[1][60]*w->fh[12] + w->term[1][61]*w->fh[30] + w->term[1][62]*w->fh[49];
-    w->S[171] = w->term[1][60]*w->fh[13] + w->term[1][61]*w->fh[31] + w->term[1][62]*w->fh[50];
-    w->S[172] = w->term[1][60]*w->fh[14] + w->term[1][61]*w->fh[32] + w->term[1][62]*w->fh[51];
-    w->S[173] = w->term[1][60]*w->fh[15] + w->term[1][61]*w->fh[33] + w->term[1][62]*w->fh[52];
-    w->S[174] = w->term[1][60]*w->fh[16] + w->term[1][61]*w->fh[34] + w->term[1][62]*w->fh[53];
-    w->S[175] = w->term[1][60]*w->fh[17] + w->term[1][61]*w->fh[35] + w->term[1][62]*w->fh[54];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][60], w->term[1][60]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][62], w->term[1][62]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&w->S[168], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][60], w->term[1][60]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][62], w->term[1][62]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[170], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][60], w->term[1][60]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][62], w->term[1][62]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&w->S[172], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][60], w->term[1][60]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][62], w->term[1][62]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&w->S[174], pair);
+    }
     w->S[176] = w->term[1][60]*w->fh[18] + w->term[1][61]*w->fh[36] + w->term[1][62]*w->fh[55];
-    w->S[177] = w->term[1][63]*w->fh[64] + w->term[1][64]*w->fh[75];
-    w->S[178] = w->term[1][63]*w->fh[65] + w->term[1][64]*w->fh[76];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][63], w->term[1][63]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][64], w->term[1][64]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&w->S[177], pair);
+    }
     w->S[179] = w->term[1][63]*w->fh[66] + w->term[1][64]*w->fh[77];
-    w->S[181] = w->term[1][72]*w->fh[4] + w->term[1][73]*w->fh[22] + w->term[1][74]*w->fh[41];
-    w->S[182] = w->term[1][72]*w->fh[5] + w->term[1][73]*w->fh[23] + w->term[1][74]*w->fh[42];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][72], w->term[1][72]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][73], w->term[1][73]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][74], w->term[1][74]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&w->S[181], pair);
+    }
     w->S[183] = w->term[1][72]*w->fh[6] + w->term[1][73]*w->fh[24] + w->term[1][74]*w->fh[43];
-    w->S[184] = w->term[1][72]*w->fh[10] + w->term[1][73]*w->fh[28] + w->term[1][74]*w->fh[47];
-    w->S[185] = w->term[1][72]*w->fh[11] + w->term[1][73]*w->fh[29] + w->term[1][74]*w->fh[48];
-    w->S[186] = w->term[1][72]*w->fh[12] + w->term[1][73]*w->fh[30] + w->term[1][74]*w->fh[49];
-    w->S[187] = w->term[1][72]*w->fh[13] + w->term[1][73]*w->fh[31] + w->term[1][74]*w->fh[50];
-    w->S[188] = w->term[1][72]*w->fh[14] + w->term[1][73]*w->fh[32] + w->term[1][74]*w->fh[51];
-    w->S[189] = w->term[1][72]*w->fh[15] + w->term[1][73]*w->fh[33] + w->term[1][74]*w->fh[52];
-    w->S[190] = w->term[1][72]*w->fh[16] + w->term[1][73]*w->fh[34] + w->term[1][74]*w->fh[53];
-    w->S[191] = w->term[1][72]*w->fh[17] + w->term[1][73]*w->fh[35] + w->term[1][74]*w->fh[54];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][72], w->term[1][72]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][73], w->term[1][73]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][74], w->term[1][74]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&w->S[184], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][72], w->term[1][72]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][73], w->term[1][73]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][74], w->term[1][74]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&w->S[186], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][72], w->term[1][72]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][73], w->term[1][73]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][74], w->term[1][74]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&w->S[188], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][72], w->term[1][72]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][73], w->term[1][73]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][74], w->term[1][74]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&w->S[190], pair);
+    }
     w->S[192] = w->term[1][72]*w->fh[18] + w->term[1][73]*w->fh[36] + w->term[1][74]*w->fh[55];
-    w->S[193] = w->term[1][75]*w->fh[64] + w->term[1][76]*w->fh[75];
-    w->S[194] = w->term[1][75]*w->fh[65] + w->term[1][76]*w->fh[76];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][75], w->term[1][75]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][76], w->term[1][76]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&w->S[193], pair);
+    }
     w->S[195] = w->term[1][75]*w->fh[66] + w->term[1][76]*w->fh[77];
 }
 
@@ -1398,110 +1678,390 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
     t->Phi[196] = w->fh[84]*w->S[87];
     t->Phi[197] = w->fh[85]*w->S[88];
     t->Phi[198] = w->fh[86]*w->S[89];
-    t->Phi[6] = w->S[0]*w->fh[4] + w->S[1]*w->fh[22] + w->S[2]*w->fh[41];
-    t->Phi[7] = w->S[0]*w->fh[5] + w->S[1]*w->fh[23] + w->S[2]*w->fh[42];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&t->Phi[6], pair);
+    }
     t->Phi[8] = w->S[0]*w->fh[6] + w->S[1]*w->fh[24] + w->S[2]*w->fh[43];
-    t->Phi[15] = w->S[0]*w->fh[10] + w->S[1]*w->fh[28] + w->S[2]*w->fh[47];
-    t->Phi[16] = w->S[0]*w->fh[11] + w->S[1]*w->fh[29] + w->S[2]*w->fh[48];
-    t->Phi[17] = w->S[0]*w->fh[12] + w->S[1]*w->fh[30] + w->S[2]*w->fh[49];
-    t->Phi[18] = w->S[0]*w->fh[13] + w->S[1]*w->fh[31] + w->S[2]*w->fh[50];
-    t->Phi[19] = w->S[0]*w->fh[14] + w->S[1]*w->fh[32] + w->S[2]*w->fh[51];
-    t->Phi[20] = w->S[0]*w->fh[15] + w->S[1]*w->fh[33] + w->S[2]*w->fh[52];
-    t->Phi[21] = w->S[0]*w->fh[16] + w->S[1]*w->fh[34] + w->S[2]*w->fh[53];
-    t->Phi[22] = w->S[0]*w->fh[17] + w->S[1]*w->fh[35] + w->S[2]*w->fh[54];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&t->Phi[15], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[17], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&t->Phi[19], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&t->Phi[21], pair);
+    }
     t->Phi[23] = w->S[0]*w->fh[18] + w->S[1]*w->fh[36] + w->S[2]*w->fh[55];
-    t->Phi[24] = w->S[3]*w->fh[64] + w->S[4]*w->fh[75];
-    t->Phi[25] = w->S[3]*w->fh[65] + w->S[4]*w->fh[76];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[3], w->S[3]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[4], w->S[4]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&t->Phi[24], pair);
+    }
     t->Phi[26] = w->S[3]*w->fh[66] + w->S[4]*w->fh[77];
-    t->Phi[33] = w->S[12]*w->fh[4] + w->S[13]*w->fh[22] + w->S[14]*w->fh[41];
-    t->Phi[34] = w->S[12]*w->fh[5] + w->S[13]*w->fh[23] + w->S[14]*w->fh[42];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[12], w->S[12]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[14], w->S[14]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&t->Phi[33], pair);
+    }
     t->Phi[35] = w->S[12]*w->fh[6] + w->S[13]*w->fh[24] + w->S[14]*w->fh[43];
-    t->Phi[42] = w->S[12]*w->fh[10] + w->S[13]*w->fh[28] + w->S[14]*w->fh[47];
-    t->Phi[43] = w->S[12]*w->fh[11] + w->S[13]*w->fh[29] + w->S[14]*w->fh[48];
-    t->Phi[44] = w->S[12]*w->fh[12] + w->S[13]*w->fh[30] + w->S[14]*w->fh[49];
-    t->Phi[45] = w->S[12]*w->fh[13] + w->S[13]*w->fh[31] + w->S[14]*w->fh[50];
-    t->Phi[46] = w->S[12]*w->fh[14] + w->S[13]*w->fh[32] + w->S[14]*w->fh[51];
-    t->Phi[47] = w->S[12]*w->fh[15] + w->S[13]*w->fh[33] + w->S[14]*w->fh[52];
-    t->Phi[48] = w->S[12]*w->fh[16] + w->S[13]*w->fh[34] + w->S[14]*w->fh[53];
-    t->Phi[49] = w->S[12]*w->fh[17] + w->S[13]*w->fh[35] + w->S[14]*w->fh[54];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[12], w->S[12]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[14], w->S[14]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&t->Phi[42], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[12], w->S[12]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[14], w->S[14]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[12], w->S[12]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[14], w->S[14]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&t->Phi[46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[12], w->S[12]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[14], w->S[14]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&t->Phi[48], pair);
+    }
     t->Phi[50] = w->S[12]*w->fh[18] + w->S[13]*w->fh[36] + w->S[14]*w->fh[55];
-    t->Phi[51] = w->S[15]*w->fh[64] + w->S[16]*w->fh[75];
-    t->Phi[52] = w->S[15]*w->fh[65] + w->S[16]*w->fh[76];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[15], w->S[15]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[16], w->S[16]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&t->Phi[51], pair);
+    }
     t->Phi[53] = w->S[15]*w->fh[66] + w->S[16]*w->fh[77];
-    t->Phi[60] = w->S[24]*w->fh[4] + w->S[25]*w->fh[22] + w->S[26]*w->fh[41];
-    t->Phi[61] = w->S[24]*w->fh[5] + w->S[25]*w->fh[23] + w->S[26]*w->fh[42];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&t->Phi[60], pair);
+    }
     t->Phi[62] = w->S[24]*w->fh[6] + w->S[25]*w->fh[24] + w->S[26]*w->fh[43];
-    t->Phi[69] = w->S[24]*w->fh[10] + w->S[25]*w->fh[28] + w->S[26]*w->fh[47];
-    t->Phi[70] = w->S[24]*w->fh[11] + w->S[25]*w->fh[29] + w->S[26]*w->fh[48];
-    t->Phi[71] = w->S[24]*w->fh[12] + w->S[25]*w->fh[30] + w->S[26]*w->fh[49];
-    t->Phi[72] = w->S[24]*w->fh[13] + w->S[25]*w->fh[31] + w->S[26]*w->fh[50];
-    t->Phi[73] = w->S[24]*w->fh[14] + w->S[25]*w->fh[32] + w->S[26]*w->fh[51];
-    t->Phi[74] = w->S[24]*w->fh[15] + w->S[25]*w->fh[33] + w->S[26]*w->fh[52];
-    t->Phi[75] = w->S[24]*w->fh[16] + w->S[25]*w->fh[34] + w->S[26]*w->fh[53];
-    t->Phi[76] = w->S[24]*w->fh[17] + w->S[25]*w->fh[35] + w->S[26]*w->fh[54];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&t->Phi[69], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[71], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&t->Phi[73], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&t->Phi[75], pair);
+    }
     t->Phi[77] = w->S[24]*w->fh[18] + w->S[25]*w->fh[36] + w->S[26]*w->fh[55];
-    t->Phi[78] = w->S[27]*w->fh[64] + w->S[28]*w->fh[75];
-    t->Phi[79] = w->S[27]*w->fh[65] + w->S[28]*w->fh[76];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[27], w->S[27]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[28], w->S[28]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&t->Phi[78], pair);
+    }
     t->Phi[80] = w->S[27]*w->fh[66] + w->S[28]*w->fh[77];
-    t->Phi[87] = w->S[36]*w->fh[4] + w->S[37]*w->fh[22] + w->S[38]*w->fh[41];
-    t->Phi[88] = w->S[36]*w->fh[5] + w->S[37]*w->fh[23] + w->S[38]*w->fh[42];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[36], w->S[36]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[38], w->S[38]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&t->Phi[87], pair);
+    }
     t->Phi[89] = w->S[36]*w->fh[6] + w->S[37]*w->fh[24] + w->S[38]*w->fh[43];
-    t->Phi[96] = w->S[36]*w->fh[10] + w->S[37]*w->fh[28] + w->S[38]*w->fh[47];
-    t->Phi[97] = w->S[36]*w->fh[11] + w->S[37]*w->fh[29] + w->S[38]*w->fh[48];
-    t->Phi[98] = w->S[36]*w->fh[12] + w->S[37]*w->fh[30] + w->S[38]*w->fh[49];
-    t->Phi[99] = w->S[36]*w->fh[13] + w->S[37]*w->fh[31] + w->S[38]*w->fh[50];
-    t->Phi[100] = w->S[36]*w->fh[14] + w->S[37]*w->fh[32] + w->S[38]*w->fh[51];
-    t->Phi[101] = w->S[36]*w->fh[15] + w->S[37]*w->fh[33] + w->S[38]*w->fh[52];
-    t->Phi[102] = w->S[36]*w->fh[16] + w->S[37]*w->fh[34] + w->S[38]*w->fh[53];
-    t->Phi[103] = w->S[36]*w->fh[17] + w->S[37]*w->fh[35] + w->S[38]*w->fh[54];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[36], w->S[36]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[38], w->S[38]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&t->Phi[96], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[36], w->S[36]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[38], w->S[38]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[98], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[36], w->S[36]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[38], w->S[38]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&t->Phi[100], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[36], w->S[36]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[38], w->S[38]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&t->Phi[102], pair);
+    }
     t->Phi[104] = w->S[36]*w->fh[18] + w->S[37]*w->fh[36] + w->S[38]*w->fh[55];
-    t->Phi[105] = w->S[39]*w->fh[64] + w->S[40]*w->fh[75];
-    t->Phi[106] = w->S[39]*w->fh[65] + w->S[40]*w->fh[76];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[39], w->S[39]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[40], w->S[40]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&t->Phi[105], pair);
+    }
     t->Phi[107] = w->S[39]*w->fh[66] + w->S[40]*w->fh[77];
-    t->Phi[114] = w->S[48]*w->fh[4] + w->S[49]*w->fh[22] + w->S[50]*w->fh[41];
-    t->Phi[115] = w->S[48]*w->fh[5] + w->S[49]*w->fh[23] + w->S[50]*w->fh[42];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&t->Phi[114], pair);
+    }
     t->Phi[116] = w->S[48]*w->fh[6] + w->S[49]*w->fh[24] + w->S[50]*w->fh[43];
-    t->Phi[123] = w->S[48]*w->fh[10] + w->S[49]*w->fh[28] + w->S[50]*w->fh[47];
-    t->Phi[124] = w->S[48]*w->fh[11] + w->S[49]*w->fh[29] + w->S[50]*w->fh[48];
-    t->Phi[125] = w->S[48]*w->fh[12] + w->S[49]*w->fh[30] + w->S[50]*w->fh[49];
-    t->Phi[126] = w->S[48]*w->fh[13] + w->S[49]*w->fh[31] + w->S[50]*w->fh[50];
-    t->Phi[127] = w->S[48]*w->fh[14] + w->S[49]*w->fh[32] + w->S[50]*w->fh[51];
-    t->Phi[128] = w->S[48]*w->fh[15] + w->S[49]*w->fh[33] + w->S[50]*w->fh[52];
-    t->Phi[129] = w->S[48]*w->fh[16] + w->S[49]*w->fh[34] + w->S[50]*w->fh[53];
-    t->Phi[130] = w->S[48]*w->fh[17] + w->S[49]*w->fh[35] + w->S[50]*w->fh[54];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&t->Phi[123], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[125], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&t->Phi[127], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&t->Phi[129], pair);
+    }
     t->Phi[131] = w->S[48]*w->fh[18] + w->S[49]*w->fh[36] + w->S[50]*w->fh[55];
-    t->Phi[132] = w->S[51]*w->fh[64] + w->S[52]*w->fh[75];
-    t->Phi[133] = w->S[51]*w->fh[65] + w->S[52]*w->fh[76];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[51], w->S[51]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[52], w->S[52]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&t->Phi[132], pair);
+    }
     t->Phi[134] = w->S[51]*w->fh[66] + w->S[52]*w->fh[77];
-    t->Phi[141] = w->S[60]*w->fh[4] + w->S[61]*w->fh[22] + w->S[62]*w->fh[41];
-    t->Phi[142] = w->S[60]*w->fh[5] + w->S[61]*w->fh[23] + w->S[62]*w->fh[42];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[60], w->S[60]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[62], w->S[62]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&t->Phi[141], pair);
+    }
     t->Phi[143] = w->S[60]*w->fh[6] + w->S[61]*w->fh[24] + w->S[62]*w->fh[43];
-    t->Phi[150] = w->S[60]*w->fh[10] + w->S[61]*w->fh[28] + w->S[62]*w->fh[47];
-    t->Phi[151] = w->S[60]*w->fh[11] + w->S[61]*w->fh[29] + w->S[62]*w->fh[48];
-    t->Phi[152] = w->S[60]*w->fh[12] + w->S[61]*w->fh[30] + w->S[62]*w->fh[49];
-    t->Phi[153] = w->S[60]*w->fh[13] + w->S[61]*w->fh[31] + w->S[62]*w->fh[50];
-    t->Phi[154] = w->S[60]*w->fh[14] + w->S[61]*w->fh[32] + w->S[62]*w->fh[51];
-    t->Phi[155] = w->S[60]*w->fh[15] + w->S[61]*w->fh[33] + w->S[62]*w->fh[52];
-    t->Phi[156] = w->S[60]*w->fh[16] + w->S[61]*w->fh[34] + w->S[62]*w->fh[53];
-    t->Phi[157] = w->S[60]*w->fh[17] + w->S[61]*w->fh[35] + w->S[62]*w->fh[54];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[60], w->S[60]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[62], w->S[62]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&t->Phi[150], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[60], w->S[60]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[62], w->S[62]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[152], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[60], w->S[60]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[62], w->S[62]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&t->Phi[154], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[60], w->S[60]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[62], w->S[62]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&t->Phi[156], pair);
+    }
     t->Phi[158] = w->S[60]*w->fh[18] + w->S[61]*w->fh[36] + w->S[62]*w->fh[55];
-    t->Phi[159] = w->S[63]*w->fh[64] + w->S[64]*w->fh[75];
-    t->Phi[160] = w->S[63]*w->fh[65] + w->S[64]*w->fh[76];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[63], w->S[63]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[64], w->S[64]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&t->Phi[159], pair);
+    }
     t->Phi[161] = w->S[63]*w->fh[66] + w->S[64]*w->fh[77];
-    t->Phi[169] = w->S[72]*w->fh[4] + w->S[73]*w->fh[22] + w->S[74]*w->fh[41];
-    t->Phi[170] = w->S[72]*w->fh[5] + w->S[73]*w->fh[23] + w->S[74]*w->fh[42];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
+                lane_pair_load(&w->fh[22]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
+                lane_pair_load(&w->fh[41]));
+        lane_pair_store(&t->Phi[169], pair);
+    }
     t->Phi[171] = w->S[72]*w->fh[6] + w->S[73]*w->fh[24] + w->S[74]*w->fh[43];
-    t->Phi[178] = w->S[72]*w->fh[10] + w->S[73]*w->fh[28] + w->S[74]*w->fh[47];
-    t->Phi[179] = w->S[72]*w->fh[11] + w->S[73]*w->fh[29] + w->S[74]*w->fh[48];
-    t->Phi[180] = w->S[72]*w->fh[12] + w->S[73]*w->fh[30] + w->S[74]*w->fh[49];
-    t->Phi[181] = w->S[72]*w->fh[13] + w->S[73]*w->fh[31] + w->S[74]*w->fh[50];
-    t->Phi[182] = w->S[72]*w->fh[14] + w->S[73]*w->fh[32] + w->S[74]*w->fh[51];
-    t->Phi[183] = w->S[72]*w->fh[15] + w->S[73]*w->fh[33] + w->S[74]*w->fh[52];
-    t->Phi[184] = w->S[72]*w->fh[16] + w->S[73]*w->fh[34] + w->S[74]*w->fh[53];
-    t->Phi[185] = w->S[72]*w->fh[17] + w->S[73]*w->fh[35] + w->S[74]*w->fh[54];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
+                lane_pair_load(&w->fh[10]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
+                lane_pair_load(&w->fh[28]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
+                lane_pair_load(&w->fh[47]));
+        lane_pair_store(&t->Phi[178], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
+                lane_pair_load(&w->fh[12]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
+                lane_pair_load(&w->fh[30]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
+                lane_pair_load(&w->fh[49]));
+        lane_pair_store(&t->Phi[180], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
+                lane_pair_load(&w->fh[14]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
+                lane_pair_load(&w->fh[32]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
+                lane_pair_load(&w->fh[51]));
+        lane_pair_store(&t->Phi[182], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
+                lane_pair_load(&w->fh[16]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
+                lane_pair_load(&w->fh[34]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
+                lane_pair_load(&w->fh[53]));
+        lane_pair_store(&t->Phi[184], pair);
+    }
     t->Phi[186] = w->S[72]*w->fh[18] + w->S[73]*w->fh[36] + w->S[74]*w->fh[55];
-    t->Phi[187] = w->S[75]*w->fh[64] + w->S[76]*w->fh[75];
-    t->Phi[188] = w->S[75]*w->fh[65] + w->S[76]*w->fh[76];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[75], w->S[75]),
+                lane_pair_load(&w->fh[64]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[76], w->S[76]),
+                lane_pair_load(&w->fh[75]));
+        lane_pair_store(&t->Phi[187], pair);
+    }
     t->Phi[189] = w->S[75]*w->fh[66] + w->S[76]*w->fh[77];
     t->Phi[168] = 0;
     t->Phi[190] = one;
@@ -2491,12 +3051,18 @@ NED_DOPPLER32_AUGMENTED_BLOCK void process_noise(const ned_doppler32_augmented_m
         ned_doppler32_augmented_transition *restrict t, ned_doppler32_augmented_discretize_scratch
         *restrict w, const ned_doppler32_augmented_scalar T)
 {
-    w->term[1][48] = T*m->q[0];
-    w->term[1][49] = T*m->q[1];
-    w->term[1][50] = T*m->q[2];
-    w->term[1][51] = T*m->q[3];
-    w->term[1][52] = T*m->q[4];
-    w->term[1][53] = T*m->q[5];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[0]));
+        lane_pair_store(&w->term[1][48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[2]));
+        lane_pair_store(&w->term[1][50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[4]));
+        lane_pair_store(&w->term[1][52], pair);
+    }
     w->term[1][0] = w->term[0][0]*w->term[1][48];
     w->term[1][1] = w->term[0][1]*w->term[1][49];
     w->term[1][2] = w->term[0][2]*w->term[1][50];
@@ -3703,294 +4269,65 @@ NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_0(const ned_doppler32_augment
         f, const ned_doppler32_augmented_transition *restrict t,
         ned_doppler32_augmented_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[0]*f->P[0][0] + t->Phi[1]*f->P[1][0] + t->Phi[2]*f->P[2][0] +
-            t->Phi[3]*f->P[3][0] + t->Phi[4]*f->P[4][0] + t->Phi[5]*f->P[5][0] +
-            t->Phi[6]*f->P[7][0] + t->Phi[7]*f->P[8][0] + t->Phi[8]*f->P[9][0] +
-            t->Phi[9]*f->P[10][0] + t->Phi[10]*f->P[11][0] + t->Phi[11]*f->P[12][0] +
-            t->Phi[12]*f->P[13][0] + t->Phi[13]*f->P[14][0] + t->Phi[14]*f->P[15][0] +
-            t->Phi[15]*f->P[18][0] + t->Phi[16]*f->P[19][0] + t->Phi[17]*f->P[20][0] +
-            t->Phi[18]*f->P[21][0] + t->Phi[19]*f->P[22][0] + t->Phi[20]*f->P[23][0] +
-            t->Phi[21]*f->P[24][0] + t->Phi[22]*f->P[25][0] + t->Phi[23]*f->P[26][0] +
-            t->Phi[24]*f->P[27][0] + t->Phi[25]*f->P[28][0] + t->Phi[26]*f->P[29][0];
-    w->M[1] = t->Phi[0]*f->P[0][1] + t->Phi[1]*f->P[1][1] + t->Phi[2]*f->P[2][1] +
-            t->Phi[3]*f->P[3][1] + t->Phi[4]*f->P[4][1] + t->Phi[5]*f->P[5][1] +
-            t->Phi[6]*f->P[7][1] + t->Phi[7]*f->P[8][1] + t->Phi[8]*f->P[9][1] +
-            t->Phi[9]*f->P[10][1] + t->Phi[10]*f->P[11][1] + t->Phi[11]*f->P[12][1] +
-            t->Phi[12]*f->P[13][1] + t->Phi[13]*f->P[14][1] + t->Phi[14]*f->P[15][1] +
-            t->Phi[15]*f->P[18][1] + t->Phi[16]*f->P[19][1] + t->Phi[17]*f->P[20][1] +
-            t->Phi[18]*f->P[21][1] + t->Phi[19]*f->P[22][1] + t->Phi[20]*f->P[23][1] +
-            t->Phi[21]*f->P[24][1] + t->Phi[22]*f->P[25][1] + t->Phi[23]*f->P[26][1] +
-            t->Phi[24]*f->P[27][1] + t->Phi[25]*f->P[28][1] + t->Phi[26]*f->P[29][1];
-    w->M[2] = t->Phi[0]*f->P[0][2] + t->Phi[1]*f->P[1][2] + t->Phi[2]*f->P[2][2] +
-            t->Phi[3]*f->P[3][2] + t->Phi[4]*f->P[4][2] + t->Phi[5]*f->P[5][2] +
-            t->Phi[6]*f->P[7][2] + t->Phi[7]*f->P[8][2] + t->Phi[8]*f->P[9][2] +
-            t->Phi[9]*f->P[10][2] + t->Phi[10]*f->P[11][2] + t->Phi[11]*f->P[12][2] +
-            t->Phi[12]*f->P[13][2] + t->Phi[13]*f->P[14][2] + t->Phi[14]*f->P[15][2] +
-            t->Phi[15]*f->P[18][2] + t->Phi[16]*f->P[19][2] + t->Phi[17]*f->P[20][2] +
-            t->Phi[18]*f->P[21][2] + t->Phi[19]*f->P[22][2] + t->Phi[20]*f->P[23][2] +
-            t->Phi[21]*f->P[24][2] + t->Phi[22]*f->P[25][2] + t->Phi[23]*f->P[26][2] +
-            t->Phi[24]*f->P[27][2] + t->Phi[25]*f->P[28][2] + t->Phi[26]*f->P[29][2];
-    w->M[3] = t->Phi[0]*f->P[0][3] + t->Phi[1]*f->P[1][3] + t->Phi[2]*f->P[2][3] +
-            t->Phi[3]*f->P[3][3] + t->Phi[4]*f->P[4][3] + t->Phi[5]*f->P[5][3] +
-            t->Phi[6]*f->P[7][3] + t->Phi[7]*f->P[8][3] + t->Phi[8]*f->P[9][3] +
-            t->Phi[9]*f->P[10][3] + t->Phi[10]*f->P[11][3] + t->Phi[11]*f->P[12][3] +
-            t->Phi[12]*f->P[13][3] + t->Phi[13]*f->P[14][3] + t->Phi[14]*f->P[15][3] +
-            t->Phi[15]*f->P[18][3] + t->Phi[16]*f->P[19][3] + t->Phi[17]*f->P[20][3] +
-            t->Phi[18]*f->P[21][3] + t->Phi[19]*f->P[22][3] + t->Phi[20]*f->P[23][3] +
-            t->Phi[21]*f->P[24][3] + t->Phi[22]*f->P[25][3] + t->Phi[23]*f->P[26][3] +
-            t->Phi[24]*f->P[27][3] + t->Phi[25]*f->P[28][3] + t->Phi[26]*f->P[29][3];
-    w->M[4] = t->Phi[0]*f->P[0][4] + t->Phi[1]*f->P[1][4] + t->Phi[2]*f->P[2][4] +
-            t->Phi[3]*f->P[3][4] + t->Phi[4]*f->P[4][4] + t->Phi[5]*f->P[5][4] +
-            t->Phi[6]*f->P[7][4] + t->Phi[7]*f->P[8][4] + t->Phi[8]*f->P[9][4] +
-            t->Phi[9]*f->P[10][4] + t->Phi[10]*f->P[11][4] + t->Phi[11]*f->P[12][4] +
-            t->Phi[12]*f->P[13][4] + t->Phi[13]*f->P[14][4] + t->Phi[14]*f->P[15][4] +
-            t->Phi[15]*f->P[18][4] + t->Phi[16]*f->P[19][4] + t->Phi[17]*f->P[20][4] +
-            t->Phi[18]*f->P[21][4] + t->Phi[19]*f->P[22][4] + t->Phi[20]*f->P[23][4] +
-            t->Phi[21]*f->P[24][4] + t->Phi[22]*f->P[25][4] + t->Phi[23]*f->P[26][4] +
-            t->Phi[24]*f->P[27][4] + t->Phi[25]*f->P[28][4] + t->Phi[26]*f->P[29][4];
-    w->M[5] = t->Phi[0]*f->P[0][5] + t->Phi[1]*f->P[1][5] + t->Phi[2]*f->P[2][5] +
-            t->Phi[3]*f->P[3][5] + t->Phi[4]*f->P[4][5] + t->Phi[5]*f->P[5][5] +
-            t->Phi[6]*f->P[7][5] + t->Phi[7]*f->P[8][5] + t->Phi[8]*f->P[9][5] +
-            t->Phi[9]*f->P[10][5] + t->Phi[10]*f->P[11][5] + t->Phi[11]*f->P[12][5] +
-            t->Phi[12]*f->P[13][5] + t->Phi[13]*f->P[14][5] + t->Phi[14]*f->P[15][5] +
-            t->Phi[15]*f->P[18][5] + t->Phi[16]*f->P[19][5] + t->Phi[17]*f->P[20][5] +
-            t->Phi[18]*f->P[21][5] + t->Phi[19]*f->P[22][5] + t->Phi[20]*f->P[23][5] +
-            t->Phi[21]*f->P[24][5] + t->Phi[22]*f->P[25][5] + t->Phi[23]*f->P[26][5] +
-            t->Phi[24]*f->P[27][5] + t->Phi[25]*f->P[28][5] + t->Phi[26]*f->P[29][5];
-    w->M[6] = t->Phi[0]*f->P[0][6] + t->Phi[1]*f->P[1][6] + t->Phi[2]*f->P[2][6] +
-            t->Phi[3]*f->P[3][6] + t->Phi[4]*f->P[4][6] + t->Phi[5]*f->P[5][6] +
-            t->Phi[6]*f->P[7][6] + t->Phi[7]*f->P[8][6] + t->Phi[8]*f->P[9][6] +
-            t->Phi[9]*f->P[10][6] + t->Phi[10]*f->P[11][6] + t->Phi[11]*f->P[12][6] +
-            t->Phi[12]*f->P[13][6] + t->Phi[13]*f->P[14][6] + t->Phi[14]*f->P[15][6] +
-            t->Phi[15]*f->P[18][6] + t->Phi[16]*f->P[19][6] + t->Phi[17]*f->P[20][6] +
-            t->Phi[18]*f->P[21][6] + t->Phi[19]*f->P[22][6] + t->Phi[20]*f->P[23][6] +
-            t->Phi[21]*f->P[24][6] + t->Phi[22]*f->P[25][6] + t->Phi[23]*f->P[26][6] +
-            t->Phi[24]*f->P[27][6] + t->Phi[25]*f->P[28][6] + t->Phi[26]*f->P[29][6];
-    w->M[7] = t->Phi[0]*f->P[0][7] + t->Phi[1]*f->P[1][7] + t->Phi[2]*f->P[2][7] +
-            t->Phi[3]*f->P[3][7] + t->Phi[4]*f->P[4][7] + t->Phi[5]*f->P[5][7] +
-            t->Phi[6]*f->P[7][7] + t->Phi[7]*f->P[8][7] + t->Phi[8]*f->P[9][7] +
-            t->Phi[9]*f->P[10][7] + t->Phi[10]*f->P[11][7] + t->Phi[11]*f->P[12][7] +
-            t->Phi[12]*f->P[13][7] + t->Phi[13]*f->P[14][7] + t->Phi[14]*f->P[15][7] +
-            t->Phi[15]*f->P[18][7] + t->Phi[16]*f->P[19][7] + t->Phi[17]*f->P[20][7] +
-            t->Phi[18]*f->P[21][7] + t->Phi[19]*f->P[22][7] + t->Phi[20]*f->P[23][7] +
-            t->Phi[21]*f->P[24][7] + t->Phi[22]*f->P[25][7] + t->Phi[23]*f->P[26][7] +
-            t->Phi[24]*f->P[27][7] + t->Phi[25]*f->P[28][7] + t->Phi[26]*f->P[29][7];
-    w->M[8] = t->Phi[0]*f->P[0][8] + t->Phi[1]*f->P[1][8] + t->Phi[2]*f->P[2][8] +
-            t->Phi[3]*f->P[3][8] + t->Phi[4]*f->P[4][8] + t->Phi[5]*f->P[5][8] +
-            t->Phi[6]*f->P[7][8] + t->Phi[7]*f->P[8][8] + t->Phi[8]*f->P[9][8] +
-            t->Phi[9]*f->P[10][8] + t->Phi[10]*f->P[11][8] + t->Phi[11]*f->P[12][8] +
-            t->Phi[12]*f->P[13][8] + t->Phi[13]*f->P[14][8] + t->Phi[14]*f->P[15][8] +
-            t->Phi[15]*f->P[18][8] + t->Phi[16]*f->P[19][8] + t->Phi[17]*f->P[20][8] +
-            t->Phi[18]*f->P[21][8] + t->Phi[19]*f->P[22][8] + t->Phi[20]*f->P[23][8] +
-            t->Phi[21]*f->P[24][8] + t->Phi[22]*f->P[25][8] + t->Phi[23]*f->P[26][8] +
-            t->Phi[24]*f->P[27][8] + t->Phi[25]*f->P[28][8] + t->Phi[26]*f->P[29][8];
-    w->M[9] = t->Phi[0]*f->P[0][9] + t->Phi[1]*f->P[1][9] + t->Phi[2]*f->P[2][9] +
-            t->Phi[3]*f->P[3][9] + t->Phi[4]*f->P[4][9] + t->Phi[5]*f->P[5][9] +
-            t->Phi[6]*f->P[7][9] + t->Phi[7]*f->P[8][9] + t->Phi[8]*f->P[9][9] +
-            t->Phi[9]*f->P[10][9] + t->Phi[10]*f->P[11][9] + t->Phi[11]*f->P[12][9] +
-            t->Phi[12]*f->P[13][9] + t->Phi[13]*f->P[14][9] + t->Phi[14]*f->P[15][9] +
-            t->Phi[15]*f->P[18][9] + t->Phi[16]*f->P[19][9] + t->Phi[17]*f->P[20][9] +
-            t->Phi[18]*f->P[21][9] + t->Phi[19]*f->P[22][9] + t->Phi[20]*f->P[23][9] +
-            t->Phi[21]*f->P[24][9] + t->Phi[22]*f->P[25][9] + t->Phi[23]*f->P[26][9] +
-            t->Phi[24]*f->P[27][9] + t->Phi[25]*f->P[28][9] + t->Phi[26]*f->P[29][9];
-    w->M[10] = t->Phi[0]*f->P[0][10] + t->Phi[1]*f->P[1][10] + t->Phi[2]*f->P[2][10] +
-            t->Phi[3]*f->P[3][10] + t->Phi[4]*f->P[4][10] + t->Phi[5]*f->P[5][10] +
-            t->Phi[6]*f->P[7][10] + t->Phi[7]*f->P[8][10] + t->Phi[8]*f->P[9][10] +
-            t->Phi[9]*f->P[10][10] + t->Phi[10]*f->P[11][10] + t->Phi[11]*f->P[12][10] +
-            t->Phi[12]*f->P[13][10] + t->Phi[13]*f->P[14][10] + t->Phi[14]*f->P[15][10] +
-            t->Phi[15]*f->P[18][10] + t->Phi[16]*f->P[19][10] + t->Phi[17]*f->P[20][10] +
-            t->Phi[18]*f->P[21][10] + t->Phi[19]*f->P[22][10] + t->Phi[20]*f->P[23][10] +
-            t->Phi[21]*f->P[24][10] + t->Phi[22]*f->P[25][10] + t->Phi[23]*f->P[26][10] +
-            t->Phi[24]*f->P[27][10] + t->Phi[25]*f->P[28][10] + t->Phi[26]*f->P[29][10];
-    w->M[11] = t->Phi[0]*f->P[0][11] + t->Phi[1]*f->P[1][11] + t->Phi[2]*f->P[2][11] +
-            t->Phi[3]*f->P[3][11] + t->Phi[4]*f->P[4][11] + t->Phi[5]*f->P[5][11] +
-            t->Phi[6]*f->P[7][11] + t->Phi[7]*f->P[8][11] + t->Phi[8]*f->P[9][11] +
-            t->Phi[9]*f->P[10][11] + t->Phi[10]*f->P[11][11] + t->Phi[11]*f->P[12][11] +
-            t->Phi[12]*f->P[13][11] + t->Phi[13]*f->P[14][11] + t->Phi[14]*f->P[15][11] +
-            t->Phi[15]*f->P[18][11] + t->Phi[16]*f->P[19][11] + t->Phi[17]*f->P[20][11] +
-            t->Phi[18]*f->P[21][11] + t->Phi[19]*f->P[22][11] + t->Phi[20]*f->P[23][11] +
-            t->Phi[21]*f->P[24][11] + t->Phi[22]*f->P[25][11] + t->Phi[23]*f->P[26][11] +
-            t->Phi[24]*f->P[27][11] + t->Phi[25]*f->P[28][11] + t->Phi[26]*f->P[29][11];
-    w->M[12] = t->Phi[0]*f->P[0][12] + t->Phi[1]*f->P[1][12] + t->Phi[2]*f->P[2][12] +
-            t->Phi[3]*f->P[3][12] + t->Phi[4]*f->P[4][12] + t->Phi[5]*f->P[5][12] +
-            t->Phi[6]*f->P[7][12] + t->Phi[7]*f->P[8][12] + t->Phi[8]*f->P[9][12] +
-            t->Phi[9]*f->P[10][12] + t->Phi[10]*f->P[11][12] + t->Phi[11]*f->P[12][12] +
-            t->Phi[12]*f->P[13][12] + t->Phi[13]*f->P[14][12] + t->Phi[14]*f->P[15][12] +
-            t->Phi[15]*f->P[18][12] + t->Phi[16]*f->P[19][12] + t->Phi[17]*f->P[20][12] +
-            t->Phi[18]*f->P[21][12] + t->Phi[19]*f->P[22][12] + t->Phi[20]*f->P[23][12] +
-            t->Phi[21]*f->P[24][12] + t->Phi[22]*f->P[25][12] + t->Phi[23]*f->P[26][12] +
-            t->Phi[24]*f->P[27][12] + t->Phi[25]*f->P[28][12] + t->Phi[26]*f->P[29][12];
-    w->M[13] = t->Phi[0]*f->P[0][13] + t->Phi[1]*f->P[1][13] + t->Phi[2]*f->P[2][13] +
-            t->Phi[3]*f->P[3][13] + t->Phi[4]*f->P[4][13] + t->Phi[5]*f->P[5][13] +
-            t->Phi[6]*f->P[7][13] + t->Phi[7]*f->P[8][13] + t->Phi[8]*f->P[9][13] +
-            t->Phi[9]*f->P[10][13] + t->Phi[10]*f->P[11][13] + t->Phi[11]*f->P[12][13] +
-            t->Phi[12]*f->P[13][13] + t->Phi[13]*f->P[14][13] + t->Phi[14]*f->P[15][13] +
-            t->Phi[15]*f->P[18][13] + t->Phi[16]*f->P[19][13] + t->Phi[17]*f->P[20][13] +
-            t->Phi[18]*f->P[21][13] + t->Phi[19]*f->P[22][13] + t->Phi[20]*f->P[23][13] +
-            t->Phi[21]*f->P[24][13] + t->Phi[22]*f->P[25][13] + t->Phi[23]*f->P[26][13] +
-            t->Phi[24]*f->P[27][13] + t->Phi[25]*f->P[28][13] + t->Phi[26]*f->P[29][13];
-    w->M[14] = t->Phi[0]*f->P[0][14] + t->Phi[1]*f->P[1][14] + t->Phi[2]*f->P[2][14] +
-            t->Phi[3]*f->P[3][14] + t->Phi[4]*f->P[4][14] + t->Phi[5]*f->P[5][14] +
-            t->Phi[6]*f->P[7][14] + t->Phi[7]*f->P[8][14] + t->Phi[8]*f->P[9][14] +
-            t->Phi[9]*f->P[10][14] + t->Phi[10]*f->P[11][14] + t->Phi[11]*f->P[12][14] +
-            t->Phi[12]*f->P[13][14] + t->Phi[13]*f->P[14][14] + t->Phi[14]*f->P[15][14] +
-            t->Phi[15]*f->P[18][14] + t->Phi[16]*f->P[19][14] + t->Phi[17]*f->P[20][14] +
-            t->Phi[18]*f->P[21][14] + t->Phi[19]*f->P[22][14] + t->Phi[20]*f->P[23][14] +
-            t->Phi[21]*f->P[24][14] + t->Phi[22]*f->P[25][14] + t->Phi[23]*f->P[26][14] +
-            t->Phi[24]*f->P[27][14] + t->Phi[25]*f->P[28][14] + t->Phi[26]*f->P[29][14];
-    w->M[15] = t->Phi[0]*f->P[0][15] + t->Phi[1]*f->P[1][15] + t->Phi[2]*f->P[2][15] +
-            t->Phi[3]*f->P[3][15] + t->Phi[4]*f->P[4][15] + t->Phi[5]*f->P[5][15] +
-            t->Phi[6]*f->P[7][15] + t->Phi[7]*f->P[8][15] + t->Phi[8]*f->P[9][15] +
-            t->Phi[9]*f->P[10][15] + t->Phi[10]*f->P[11][15] + t->Phi[11]*f->P[12][15] +
-            t->Phi[12]*f->P[13][15] + t->Phi[13]*f->P[14][15] + t->Phi[14]*f->P[15][15] +
-            t->Phi[15]*f->P[18][15] + t->Phi[16]*f->P[19][15] + t->Phi[17]*f->P[20][15] +
-            t->Phi[18]*f->P[21][15] + t->Phi[19]*f->P[22][15] + t->Phi[20]*f->P[23][15] +
-            t->Phi[21]*f->P[24][15] + t->Phi[22]*f->P[25][15] + t->Phi[23]*f->P[26][15] +
-            t->Phi[24]*f->P[27][15] + t->Phi[25]*f->P[28][15] + t->Phi[26]*f->P[29][15];
-    w->M[16] = t->Phi[0]*f->P[0][16] + t->Phi[1]*f->P[1][16] + t->Phi[2]*f->P[2][16] +
-            t->Phi[3]*f->P[3][16] + t->Phi[4]*f->P[4][16] + t->Phi[5]*f->P[5][16] +
-            t->Phi[6]*f->P[7][16] + t->Phi[7]*f->P[8][16] + t->Phi[8]*f->P[9][16] +
-            t->Phi[9]*f->P[10][16] + t->Phi[10]*f->P[11][16] + t->Phi[11]*f->P[12][16] +
-            t->Phi[12]*f->P[13][16] + t->Phi[13]*f->P[14][16] + t->Phi[14]*f->P[15][16] +
-            t->Phi[15]*f->P[18][16] + t->Phi[16]*f->P[19][16] + t->Phi[17]*f->P[20][16] +
-            t->Phi[18]*f->P[21][16] + t->Phi[19]*f->P[22][16] + t->Phi[20]*f->P[23][16] +
-            t->Phi[21]*f->P[24][16] + t->Phi[22]*f->P[25][16] + t->Phi[23]*f->P[26][16] +
-            t->Phi[24]*f->P[27][16] + t->Phi[25]*f->P[28][16] + t->Phi[26]*f->P[29][16];
-    w->M[17] = t->Phi[0]*f->P[0][17] + t->Phi[1]*f->P[1][17] + t->Phi[2]*f->P[2][17] +
-            t->Phi[3]*f->P[3][17] + t->Phi[4]*f->P[4][17] + t->Phi[5]*f->P[5][17] +
-            t->Phi[6]*f->P[7][17] + t->Phi[7]*f->P[8][17] + t->Phi[8]*f->P[9][17] +
-            t->Phi[9]*f->P[10][17] + t->Phi[10]*f->P[11][17] + t->Phi[11]*f->P[12][17] +
-            t->Phi[12]*f->P[13][17] + t->Phi[13]*f->P[14][17] + t->Phi[14]*f->P[15][17] +
-            t->Phi[15]*f->P[18][17] + t->Phi[16]*f->P[19][17] + t->Phi[17]*f->P[20][17] +
-            t->Phi[18]*f->P[21][17] + t->Phi[19]*f->P[22][17] + t->Phi[20]*f->P[23][17] +
-            t->Phi[21]*f->P[24][17] + t->Phi[22]*f->P[25][17] + t->Phi[23]*f->P[26][17] +
-            t->Phi[24]*f->P[27][17] + t->Phi[25]*f->P[28][17] + t->Phi[26]*f->P[29][17];
-    w->M[18] = t->Phi[0]*f->P[0][18] + t->Phi[1]*f->P[1][18] + t->Phi[2]*f->P[2][18] +
-            t->Phi[3]*f->P[3][18] + t->Phi[4]*f->P[4][18] + t->Phi[5]*f->P[5][18] +
-            t->Phi[6]*f->P[7][18] + t->Phi[7]*f->P[8][18] + t->Phi[8]*f->P[9][18] +
-            t->Phi[9]*f->P[10][18] + t->Phi[10]*f->P[11][18] + t->Phi[11]*f->P[12][18] +
-            t->Phi[12]*f->P[13][18] + t->Phi[13]*f->P[14][18] + t->Phi[14]*f->P[15][18] +
-            t->Phi[15]*f->P[18][18] + t->Phi[16]*f->P[19][18] + t->Phi[17]*f->P[20][18] +
-            t->Phi[18]*f->P[21][18] + t->Phi[19]*f->P[22][18] + t->Phi[20]*f->P[23][18] +
-            t->Phi[21]*f->P[24][18] + t->Phi[22]*f->P[25][18] + t->Phi[23]*f->P[26][18] +
-            t->Phi[24]*f->P[27][18] + t->Phi[25]*f->P[28][18] + t->Phi[26]*f->P[29][18];
-    w->M[19] = t->Phi[0]*f->P[0][19] + t->Phi[1]*f->P[1][19] + t->Phi[2]*f->P[2][19] +
-            t->Phi[3]*f->P[3][19] + t->Phi[4]*f->P[4][19] + t->Phi[5]*f->P[5][19] +
-            t->Phi[6]*f->P[7][19] + t->Phi[7]*f->P[8][19] + t->Phi[8]*f->P[9][19] +
-            t->Phi[9]*f->P[10][19] + t->Phi[10]*f->P[11][19] + t->Phi[11]*f->P[12][19] +
-            t->Phi[12]*f->P[13][19] + t->Phi[13]*f->P[14][19] + t->Phi[14]*f->P[15][19] +
-            t->Phi[15]*f->P[18][19] + t->Phi[16]*f->P[19][19] + t->Phi[17]*f->P[20][19] +
-            t->Phi[18]*f->P[21][19] + t->Phi[19]*f->P[22][19] + t->Phi[20]*f->P[23][19] +
-            t->Phi[21]*f->P[24][19] + t->Phi[22]*f->P[25][19] + t->Phi[23]*f->P[26][19] +
-            t->Phi[24]*f->P[27][19] + t->Phi[25]*f->P[28][19] + t->Phi[26]*f->P[29][19];
-    w->M[20] = t->Phi[0]*f->P[0][20] + t->Phi[1]*f->P[1][20] + t->Phi[2]*f->P[2][20] +
-            t->Phi[3]*f->P[3][20] + t->Phi[4]*f->P[4][20] + t->Phi[5]*f->P[5][20] +
-            t->Phi[6]*f->P[7][20] + t->Phi[7]*f->P[8][20] + t->Phi[8]*f->P[9][20] +
-            t->Phi[9]*f->P[10][20] + t->Phi[10]*f->P[11][20] + t->Phi[11]*f->P[12][20] +
-            t->Phi[12]*f->P[13][20] + t->Phi[13]*f->P[14][20] + t->Phi[14]*f->P[15][20] +
-            t->Phi[15]*f->P[18][20] + t->Phi[16]*f->P[19][20] + t->Phi[17]*f->P[20][20] +
-            t->Phi[18]*f->P[21][20] + t->Phi[19]*f->P[22][20] + t->Phi[20]*f->P[23][20] +
-            t->Phi[21]*f->P[24][20] + t->Phi[22]*f->P[25][20] + t->Phi[23]*f->P[26][20] +
-            t->Phi[24]*f->P[27][20] + t->Phi[25]*f->P[28][20] + t->Phi[26]*f->P[29][20];
-    w->M[21] = t->Phi[0]*f->P[0][21] + t->Phi[1]*f->P[1][21] + t->Phi[2]*f->P[2][21] +
-            t->Phi[3]*f->P[3][21] + t->Phi[4]*f->P[4][21] + t->Phi[5]*f->P[5][21] +
-            t->Phi[6]*f->P[7][21] + t->Phi[7]*f->P[8][21] + t->Phi[8]*f->P[9][21] +
-            t->Phi[9]*f->P[10][21] + t->Phi[10]*f->P[11][21] + t->Phi[11]*f->P[12][21] +
-            t->Phi[12]*f->P[13][21] + t->Phi[13]*f->P[14][21] + t->Phi[14]*f->P[15][21] +
-            t->Phi[15]*f->P[18][21] + t->Phi[16]*f->P[19][21] + t->Phi[17]*f->P[20][21] +
-            t->Phi[18]*f->P[21][21] + t->Phi[19]*f->P[22][21] + t->Phi[20]*f->P[23][21] +
-            t->Phi[21]*f->P[24][21] + t->Phi[22]*f->P[25][21] + t->Phi[23]*f->P[26][21] +
-            t->Phi[24]*f->P[27][21] + t->Phi[25]*f->P[28][21] + t->Phi[26]*f->P[29][21];
-    w->M[22] = t->Phi[0]*f->P[0][22] + t->Phi[1]*f->P[1][22] + t->Phi[2]*f->P[2][22] +
-            t->Phi[3]*f->P[3][22] + t->Phi[4]*f->P[4][22] + t->Phi[5]*f->P[5][22] +
-            t->Phi[6]*f->P[7][22] + t->Phi[7]*f->P[8][22] + t->Phi[8]*f->P[9][22] +
-            t->Phi[9]*f->P[10][22] + t->Phi[10]*f->P[11][22] + t->Phi[11]*f->P[12][22] +
-            t->Phi[12]*f->P[13][22] + t->Phi[13]*f->P[14][22] + t->Phi[14]*f->P[15][22] +
-            t->Phi[15]*f->P[18][22] + t->Phi[16]*f->P[19][22] + t->Phi[17]*f->P[20][22] +
-            t->Phi[18]*f->P[21][22] + t->Phi[19]*f->P[22][22] + t->Phi[20]*f->P[23][22] +
-            t->Phi[21]*f->P[24][22] + t->Phi[22]*f->P[25][22] + t->Phi[23]*f->P[26][22] +
-            t->Phi[24]*f->P[27][22] + t->Phi[25]*f->P[28][22] + t->Phi[26]*f->P[29][22];
-    w->M[23] = t->Phi[0]*f->P[0][23] + t->Phi[1]*f->P[1][23] + t->Phi[2]*f->P[2][23] +
-            t->Phi[3]*f->P[3][23] + t->Phi[4]*f->P[4][23] + t->Phi[5]*f->P[5][23] +
-            t->Phi[6]*f->P[7][23] + t->Phi[7]*f->P[8][23] + t->Phi[8]*f->P[9][23] +
-            t->Phi[9]*f->P[10][23] + t->Phi[10]*f->P[11][23] + t->Phi[11]*f->P[12][23] +
-            t->Phi[12]*f->P[13][23] + t->Phi[13]*f->P[14][23] + t->Phi[14]*f->P[15][23] +
-            t->Phi[15]*f->P[18][23] + t->Phi[16]*f->P[19][23] + t->Phi[17]*f->P[20][23] +
-            t->Phi[18]*f->P[21][23] + t->Phi[19]*f->P[22][23] + t->Phi[20]*f->P[23][23] +
-            t->Phi[21]*f->P[24][23] + t->Phi[22]*f->P[25][23] + t->Phi[23]*f->P[26][23] +
-            t->Phi[24]*f->P[27][23] + t->Phi[25]*f->P[28][23] + t->Phi[26]*f->P[29][23];
-    w->M[24] = t->Phi[0]*f->P[0][24] + t->Phi[1]*f->P[1][24] + t->Phi[2]*f->P[2][24] +
-            t->Phi[3]*f->P[3][24] + t->Phi[4]*f->P[4][24] + t->Phi[5]*f->P[5][24] +
-            t->Phi[6]*f->P[7][24] + t->Phi[7]*f->P[8][24] + t->Phi[8]*f->P[9][24] +
-            t->Phi[9]*f->P[10][24] + t->Phi[10]*f->P[11][24] + t->Phi[11]*f->P[12][24] +
-            t->Phi[12]*f->P[13][24] + t->Phi[13]*f->P[14][24] + t->Phi[14]*f->P[15][24] +
-            t->Phi[15]*f->P[18][24] + t->Phi[16]*f->P[19][24] + t->Phi[17]*f->P[20][24] +
-            t->Phi[18]*f->P[21][24] + t->Phi[19]*f->P[22][24] + t->Phi[20]*f->P[23][24] +
-            t->Phi[21]*f->P[24][24] + t->Phi[22]*f->P[25][24] + t->Phi[23]*f->P[26][24] +
-            t->Phi[24]*f->P[27][24] + t->Phi[25]*f->P[28][24] + t->Phi[26]*f->P[29][24];
-    w->M[25] = t->Phi[0]*f->P[0][25] + t->Phi[1]*f->P[1][25] + t->Phi[2]*f->P[2][25] +
-            t->Phi[3]*f->P[3][25] + t->Phi[4]*f->P[4][25] + t->Phi[5]*f->P[5][25] +
-            t->Phi[6]*f->P[7][25] + t->Phi[7]*f->P[8][25] + t->Phi[8]*f->P[9][25] +
-            t->Phi[9]*f->P[10][25] + t->Phi[10]*f->P[11][25] + t->Phi[11]*f->P[12][25] +
-            t->Phi[12]*f->P[13][25] + t->Phi[13]*f->P[14][25] + t->Phi[14]*f->P[15][25] +
-            t->Phi[15]*f->P[18][25] + t->Phi[16]*f->P[19][25] + t->Phi[17]*f->P[20][25] +
-            t->Phi[18]*f->P[21][25] + t->Phi[19]*f->P[22][25] + t->Phi[20]*f->P[23][25] +
-            t->Phi[21]*f->P[24][25] + t->Phi[22]*f->P[25][25] + t->Phi[23]*f->P[26][25] +
-            t->Phi[24]*f->P[27][25] + t->Phi[25]*f->P[28][25] + t->Phi[26]*f->P[29][25];
-    w->M[26] = t->Phi[0]*f->P[0][26] + t->Phi[1]*f->P[1][26] + t->Phi[2]*f->P[2][26] +
-            t->Phi[3]*f->P[3][26] + t->Phi[4]*f->P[4][26] + t->Phi[5]*f->P[5][26] +
-            t->Phi[6]*f->P[7][26] + t->Phi[7]*f->P[8][26] + t->Phi[8]*f->P[9][26] +
-            t->Phi[9]*f->P[10][26] + t->Phi[10]*f->P[11][26] + t->Phi[11]*f->P[12][26] +
-            t->Phi[12]*f->P[13][26] + t->Phi[13]*f->P[14][26] + t->Phi[14]*f->P[15][26] +
-            t->Phi[15]*f->P[18][26] + t->Phi[16]*f->P[19][26] + t->Phi[17]*f->P[20][26] +
-            t->Phi[18]*f->P[21][26] + t->Phi[19]*f->P[22][26] + t->Phi[20]*f->P[23][26] +
-            t->Phi[21]*f->P[24][26] + t->Phi[22]*f->P[25][26] + t->Phi[23]*f->P[26][26] +
-            t->Phi[24]*f->P[27][26] + t->Phi[25]*f->P[28][26] + t->Phi[26]*f->P[29][26];
-    w->M[27] = t->Phi[0]*f->P[0][27] + t->Phi[1]*f->P[1][27] + t->Phi[2]*f->P[2][27] +
-            t->Phi[3]*f->P[3][27] + t->Phi[4]*f->P[4][27] + t->Phi[5]*f->P[5][27] +
-            t->Phi[6]*f->P[7][27] + t->Phi[7]*f->P[8][27] + t->Phi[8]*f->P[9][27] +
-            t->Phi[9]*f->P[10][27] + t->Phi[10]*f->P[11][27] + t->Phi[11]*f->P[12][27] +
-            t->Phi[12]*f->P[13][27] + t->Phi[13]*f->P[14][27] + t->Phi[14]*f->P[15][27] +
-            t->Phi[15]*f->P[18][27] + t->Phi[16]*f->P[19][27] + t->Phi[17]*f->P[20][27] +
-            t->Phi[18]*f->P[21][27] + t->Phi[19]*f->P[22][27] + t->Phi[20]*f->P[23][27] +
-            t->Phi[21]*f->P[24][27] + t->Phi[22]*f->P[25][27] + t->Phi[23]*f->P[26][27] +
-            t->Phi[24]*f->P[27][27] + t->Phi[25]*f->P[28][27] + t->Phi[26]*f->P[29][27];
-    w->M[28] = t->Phi[0]*f->P[0][28] + t->Phi[1]*f->P[1][28] + t->Phi[2]*f->P[2][28] +
-            t->Phi[3]*f->P[3][28] + t->Phi[4]*f->P[4][28] + t->Phi[5]*f->P[5][28] +
-            t->Phi[6]*f->P[7][28] + t->Phi[7]*f->P[8][28] + t->Phi[8]*f->P[9][28] +
-            t->Phi[9]*f->P[10][28] + t->Phi[10]*f->P[11][28] + t->Phi[11]*f->P[12][28] +
-            t->Phi[12]*f->P[13][28] + t->Phi[13]*f->P[14][28] + t->Phi[14]*f->P[15][28] +
-            t->Phi[15]*f->P[18][28] + t->Phi[16]*f->P[19][28] + t->Phi[17]*f->P[20][28] +
-            t->Phi[18]*f->P[21][28] + t->Phi[19]*f->P[22][28] + t->Phi[20]*f->P[23][28] +
-            t->Phi[21]*f->P[24][28] + t->Phi[22]*f->P[25][28] + t->Phi[23]*f->P[26][28] +
-            t->Phi[24]*f->P[27][28] + t->Phi[25]*f->P[28][28] + t->Phi[26]*f->P[29][28];
-    w->M[29] = t->Phi[0]*f->P[0][29] + t->Phi[1]*f->P[1][29] + t->Phi[2]*f->P[2][29] +
-            t->Phi[3]*f->P[3][29] + t->Phi[4]*f->P[4][29] + t->Phi[5]*f->P[5][29] +
-            t->Phi[6]*f->P[7][29] + t->Phi[7]*f->P[8][29] + t->Phi[8]*f->P[9][29] +
-            t->Phi[9]*f->P[10][29] + t->Phi[10]*f->P[11][29] + t->Phi[11]*f->P[12][29] +
-            t->Phi[12]*f->P[13][29] + t->Phi[13]*f->P[14][29] + t->Phi[14]*f->P[15][29] +
-            t->Phi[15]*f->P[18][29] + t->Phi[16]*f->P[19][29] + t->Phi[17]*f->P[20][29] +
-            t->Phi[18]*f->P[21][29] + t->Phi[19]*f->P[22][29] + t->Phi[20]*f->P[23][29] +
-            t->Phi[21]*f->P[24][29] + t->Phi[22]*f->P[25][29] + t->Phi[23]*f->P[26][29] +
-            t->Phi[24]*f->P[27][29] + t->Phi[25]*f->P[28][29] + t->Phi[26]*f->P[29][29];
-    w->M[30] = t->Phi[0]*f->P[0][30] + t->Phi[1]*f->P[1][30] + t->Phi[2]*f->P[2][30] +
-            t->Phi[3]*f->P[3][30] + t->Phi[4]*f->P[4][30] + t->Phi[5]*f->P[5][30] +
-            t->Phi[6]*f->P[7][30] + t->Phi[7]*f->P[8][30] + t->Phi[8]*f->P[9][30] +
-            t->Phi[9]*f->P[10][30] + t->Phi[10]*f->P[11][30] + t->Phi[11]*f->P[12][30] +
-            t->Phi[12]*f->P[13][30] + t->Phi[13]*f->P[14][30] + t->Phi[14]*f->P[15][30] +
-            t->Phi[15]*f->P[18][30] + t->Phi[16]*f->P[19][30] + t->Phi[17]*f->P[20][30] +
-            t->Phi[18]*f->P[21][30] + t->Phi[19]*f->P[22][30] + t->Phi[20]*f->P[23][30] +
-            t->Phi[21]*f->P[24][30] + t->Phi[22]*f->P[25][30] + t->Phi[23]*f->P[26][30] +
-            t->Phi[24]*f->P[27][30] + t->Phi[25]*f->P[28][30] + t->Phi[26]*f->P[29][30];
-    w->M[31] = t->Phi[0]*f->P[0][31] + t->Phi[1]*f->P[1][31] + t->Phi[2]*f->P[2][31] +
-            t->Phi[3]*f->P[3][31] + t->Phi[4]*f->P[4][31] + t->Phi[5]*f->P[5][31] +
-            t->Phi[6]*f->P[7][31] + t->Phi[7]*f->P[8][31] + t->Phi[8]*f->P[9][31] +
-            t->Phi[9]*f->P[10][31] + t->Phi[10]*f->P[11][31] + t->Phi[11]*f->P[12][31] +
-            t->Phi[12]*f->P[13][31] + t->Phi[13]*f->P[14][31] + t->Phi[14]*f->P[15][31] +
-            t->Phi[15]*f->P[18][31] + t->Phi[16]*f->P[19][31] + t->Phi[17]*f->P[20][31] +
-            t->Phi[18]*f->P[21][31] + t->Phi[19]*f->P[22][31] + t->Phi[20]*f->P[23][31] +
-            t->Phi[21]*f->P[24][31] + t->Phi[22]*f->P[25][31] + t->Phi[23]*f->P[26][31] +
-            t->Phi[24]*f->P[27][31] + t->Phi[25]*f->P[28][31] + t->Phi[26]*f->P[29][31];
+    int c;
+    lane_pair b[27];
+    b[0] = lane_pair_of(t->Phi[0], t->Phi[0]);
+    b[1] = lane_pair_of(t->Phi[1], t->Phi[1]);
+    b[2] = lane_pair_of(t->Phi[2], t->Phi[2]);
+    b[3] = lane_pair_of(t->Phi[3], t->Phi[3]);
+    b[4] = lane_pair_of(t->Phi[4], t->Phi[4]);
+    b[5] = lane_pair_of(t->Phi[5], t->Phi[5]);
+    b[6] = lane_pair_of(t->Phi[6], t->Phi[6]);
+    b[7] = lane_pair_of(t->Phi[7], t->Phi[7]);
+    b[8] = lane_pair_of(t->Phi[8], t->Phi[8]);
+    b[9] = lane_pair_of(t->Phi[9], t->Phi[9]);
+    b[10] = lane_pair_of(t->Phi[10], t->Phi[10]);
+    b[11] = lane_pair_of(t->Phi[11], t->Phi[11]);
+    b[12] = lane_pair_of(t->Phi[12], t->Phi[12]);
+    b[13] = lane_pair_of(t->Phi[13], t->Phi[13]);
+    b[14] = lane_pair_of(t->Phi[14], t->Phi[14]);
+    b[15] = lane_pair_of(t->Phi[15], t->Phi[15]);
+    b[16] = lane_pair_of(t->Phi[16], t->Phi[16]);
+    b[17] = lane_pair_of(t->Phi[17], t->Phi[17]);
+    b[18] = lane_pair_of(t->Phi[18], t->Phi[18]);
+    b[19] = lane_pair_of(t->Phi[19], t->Phi[19]);
+    b[20] = lane_pair_of(t->Phi[20], t->Phi[20]);
+    b[21] = lane_pair_of(t->Phi[21], t->Phi[21]);
+    b[22] = lane_pair_of(t->Phi[22], t->Phi[22]);
+    b[23] = lane_pair_of(t->Phi[23], t->Phi[23]);
+    b[24] = lane_pair_of(t->Phi[24], t->Phi[24]);
+    b[25] = lane_pair_of(t->Phi[25], t->Phi[25]);
+    b[26] = lane_pair_of(t->Phi[26], t->Phi[26]);
+    for (c = 0; c + 1 < 32; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[18][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[19][c]));
+        acc = lane_pair_add_product(acc, b[17], lane_pair_load(&f->P[20][c]));
+        acc = lane_pair_add_product(acc, b[18], lane_pair_load(&f->P[21][c]));
+        acc = lane_pair_add_product(acc, b[19], lane_pair_load(&f->P[22][c]));
+        acc = lane_pair_add_product(acc, b[20], lane_pair_load(&f->P[23][c]));
+        acc = lane_pair_add_product(acc, b[21], lane_pair_load(&f->P[24][c]));
+        acc = lane_pair_add_product(acc, b[22], lane_pair_load(&f->P[25][c]));
+        acc = lane_pair_add_product(acc, b[23], lane_pair_load(&f->P[26][c]));
+        acc = lane_pair_add_product(acc, b[24], lane_pair_load(&f->P[27][c]));
+        acc = lane_pair_add_product(acc, b[25], lane_pair_load(&f->P[28][c]));
+        acc = lane_pair_add_product(acc, b[26], lane_pair_load(&f->P[29][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -4134,294 +4471,65 @@ NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_1(const ned_doppler32_augment
         f, const ned_doppler32_augmented_transition *restrict t,
         ned_doppler32_augmented_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[27]*f->P[0][0] + t->Phi[28]*f->P[1][0] + t->Phi[29]*f->P[2][0] +
-            t->Phi[30]*f->P[3][0] + t->Phi[31]*f->P[4][0] + t->Phi[32]*f->P[5][0] +
-            t->Phi[33]*f->P[7][0] + t->Phi[34]*f->P[8][0] + t->Phi[35]*f->P[9][0] +
-            t->Phi[36]*f->P[10][0] + t->Phi[37]*f->P[11][0] + t->Phi[38]*f->P[12][0] +
-            t->Phi[39]*f->P[13][0] + t->Phi[40]*f->P[14][0] + t->Phi[41]*f->P[15][0] +
-            t->Phi[42]*f->P[18][0] + t->Phi[43]*f->P[19][0] + t->Phi[44]*f->P[20][0] +
-            t->Phi[45]*f->P[21][0] + t->Phi[46]*f->P[22][0] + t->Phi[47]*f->P[23][0] +
-            t->Phi[48]*f->P[24][0] + t->Phi[49]*f->P[25][0] + t->Phi[50]*f->P[26][0] +
-            t->Phi[51]*f->P[27][0] + t->Phi[52]*f->P[28][0] + t->Phi[53]*f->P[29][0];
-    w->M[1] = t->Phi[27]*f->P[0][1] + t->Phi[28]*f->P[1][1] + t->Phi[29]*f->P[2][1] +
-            t->Phi[30]*f->P[3][1] + t->Phi[31]*f->P[4][1] + t->Phi[32]*f->P[5][1] +
-            t->Phi[33]*f->P[7][1] + t->Phi[34]*f->P[8][1] + t->Phi[35]*f->P[9][1] +
-            t->Phi[36]*f->P[10][1] + t->Phi[37]*f->P[11][1] + t->Phi[38]*f->P[12][1] +
-            t->Phi[39]*f->P[13][1] + t->Phi[40]*f->P[14][1] + t->Phi[41]*f->P[15][1] +
-            t->Phi[42]*f->P[18][1] + t->Phi[43]*f->P[19][1] + t->Phi[44]*f->P[20][1] +
-            t->Phi[45]*f->P[21][1] + t->Phi[46]*f->P[22][1] + t->Phi[47]*f->P[23][1] +
-            t->Phi[48]*f->P[24][1] + t->Phi[49]*f->P[25][1] + t->Phi[50]*f->P[26][1] +
-            t->Phi[51]*f->P[27][1] + t->Phi[52]*f->P[28][1] + t->Phi[53]*f->P[29][1];
-    w->M[2] = t->Phi[27]*f->P[0][2] + t->Phi[28]*f->P[1][2] + t->Phi[29]*f->P[2][2] +
-            t->Phi[30]*f->P[3][2] + t->Phi[31]*f->P[4][2] + t->Phi[32]*f->P[5][2] +
-            t->Phi[33]*f->P[7][2] + t->Phi[34]*f->P[8][2] + t->Phi[35]*f->P[9][2] +
-            t->Phi[36]*f->P[10][2] + t->Phi[37]*f->P[11][2] + t->Phi[38]*f->P[12][2] +
-            t->Phi[39]*f->P[13][2] + t->Phi[40]*f->P[14][2] + t->Phi[41]*f->P[15][2] +
-            t->Phi[42]*f->P[18][2] + t->Phi[43]*f->P[19][2] + t->Phi[44]*f->P[20][2] +
-            t->Phi[45]*f->P[21][2] + t->Phi[46]*f->P[22][2] + t->Phi[47]*f->P[23][2] +
-            t->Phi[48]*f->P[24][2] + t->Phi[49]*f->P[25][2] + t->Phi[50]*f->P[26][2] +
-            t->Phi[51]*f->P[27][2] + t->Phi[52]*f->P[28][2] + t->Phi[53]*f->P[29][2];
-    w->M[3] = t->Phi[27]*f->P[0][3] + t->Phi[28]*f->P[1][3] + t->Phi[29]*f->P[2][3] +
-            t->Phi[30]*f->P[3][3] + t->Phi[31]*f->P[4][3] + t->Phi[32]*f->P[5][3] +
-            t->Phi[33]*f->P[7][3] + t->Phi[34]*f->P[8][3] + t->Phi[35]*f->P[9][3] +
-            t->Phi[36]*f->P[10][3] + t->Phi[37]*f->P[11][3] + t->Phi[38]*f->P[12][3] +
-            t->Phi[39]*f->P[13][3] + t->Phi[40]*f->P[14][3] + t->Phi[41]*f->P[15][3] +
-            t->Phi[42]*f->P[18][3] + t->Phi[43]*f->P[19][3] + t->Phi[44]*f->P[20][3] +
-            t->Phi[45]*f->P[21][3] + t->Phi[46]*f->P[22][3] + t->Phi[47]*f->P[23][3] +
-            t->Phi[48]*f->P[24][3] + t->Phi[49]*f->P[25][3] + t->Phi[50]*f->P[26][3] +
-            t->Phi[51]*f->P[27][3] + t->Phi[52]*f->P[28][3] + t->Phi[53]*f->P[29][3];
-    w->M[4] = t->Phi[27]*f->P[0][4] + t->Phi[28]*f->P[1][4] + t->Phi[29]*f->P[2][4] +
-            t->Phi[30]*f->P[3][4] + t->Phi[31]*f->P[4][4] + t->Phi[32]*f->P[5][4] +
-            t->Phi[33]*f->P[7][4] + t->Phi[34]*f->P[8][4] + t->Phi[35]*f->P[9][4] +
-            t->Phi[36]*f->P[10][4] + t->Phi[37]*f->P[11][4] + t->Phi[38]*f->P[12][4] +
-            t->Phi[39]*f->P[13][4] + t->Phi[40]*f->P[14][4] + t->Phi[41]*f->P[15][4] +
-            t->Phi[42]*f->P[18][4] + t->Phi[43]*f->P[19][4] + t->Phi[44]*f->P[20][4] +
-            t->Phi[45]*f->P[21][4] + t->Phi[46]*f->P[22][4] + t->Phi[47]*f->P[23][4] +
-            t->Phi[48]*f->P[24][4] + t->Phi[49]*f->P[25][4] + t->Phi[50]*f->P[26][4] +
-            t->Phi[51]*f->P[27][4] + t->Phi[52]*f->P[28][4] + t->Phi[53]*f->P[29][4];
-    w->M[5] = t->Phi[27]*f->P[0][5] + t->Phi[28]*f->P[1][5] + t->Phi[29]*f->P[2][5] +
-            t->Phi[30]*f->P[3][5] + t->Phi[31]*f->P[4][5] + t->Phi[32]*f->P[5][5] +
-            t->Phi[33]*f->P[7][5] + t->Phi[34]*f->P[8][5] + t->Phi[35]*f->P[9][5] +
-            t->Phi[36]*f->P[10][5] + t->Phi[37]*f->P[11][5] + t->Phi[38]*f->P[12][5] +
-            t->Phi[39]*f->P[13][5] + t->Phi[40]*f->P[14][5] + t->Phi[41]*f->P[15][5] +
-            t->Phi[42]*f->P[18][5] + t->Phi[43]*f->P[19][5] + t->Phi[44]*f->P[20][5] +
-            t->Phi[45]*f->P[21][5] + t->Phi[46]*f->P[22][5] + t->Phi[47]*f->P[23][5] +
-            t->Phi[48]*f->P[24][5] + t->Phi[49]*f->P[25][5] + t->Phi[50]*f->P[26][5] +
-            t->Phi[51]*f->P[27][5] + t->Phi[52]*f->P[28][5] + t->Phi[53]*f->P[29][5];
-    w->M[6] = t->Phi[27]*f->P[0][6] + t->Phi[28]*f->P[1][6] + t->Phi[29]*f->P[2][6] +
-            t->Phi[30]*f->P[3][6] + t->Phi[31]*f->P[4][6] + t->Phi[32]*f->P[5][6] +
-            t->Phi[33]*f->P[7][6] + t->Phi[34]*f->P[8][6] + t->Phi[35]*f->P[9][6] +
-            t->Phi[36]*f->P[10][6] + t->Phi[37]*f->P[11][6] + t->Phi[38]*f->P[12][6] +
-            t->Phi[39]*f->P[13][6] + t->Phi[40]*f->P[14][6] + t->Phi[41]*f->P[15][6] +
-            t->Phi[42]*f->P[18][6] + t->Phi[43]*f->P[19][6] + t->Phi[44]*f->P[20][6] +
-            t->Phi[45]*f->P[21][6] + t->Phi[46]*f->P[22][6] + t->Phi[47]*f->P[23][6] +
-            t->Phi[48]*f->P[24][6] + t->Phi[49]*f->P[25][6] + t->Phi[50]*f->P[26][6] +
-            t->Phi[51]*f->P[27][6] + t->Phi[52]*f->P[28][6] + t->Phi[53]*f->P[29][6];
-    w->M[7] = t->Phi[27]*f->P[0][7] + t->Phi[28]*f->P[1][7] + t->Phi[29]*f->P[2][7] +
-            t->Phi[30]*f->P[3][7] + t->Phi[31]*f->P[4][7] + t->Phi[32]*f->P[5][7] +
-            t->Phi[33]*f->P[7][7] + t->Phi[34]*f->P[8][7] + t->Phi[35]*f->P[9][7] +
-            t->Phi[36]*f->P[10][7] + t->Phi[37]*f->P[11][7] + t->Phi[38]*f->P[12][7] +
-            t->Phi[39]*f->P[13][7] + t->Phi[40]*f->P[14][7] + t->Phi[41]*f->P[15][7] +
-            t->Phi[42]*f->P[18][7] + t->Phi[43]*f->P[19][7] + t->Phi[44]*f->P[20][7] +
-            t->Phi[45]*f->P[21][7] + t->Phi[46]*f->P[22][7] + t->Phi[47]*f->P[23][7] +
-            t->Phi[48]*f->P[24][7] + t->Phi[49]*f->P[25][7] + t->Phi[50]*f->P[26][7] +
-            t->Phi[51]*f->P[27][7] + t->Phi[52]*f->P[28][7] + t->Phi[53]*f->P[29][7];
-    w->M[8] = t->Phi[27]*f->P[0][8] + t->Phi[28]*f->P[1][8] + t->Phi[29]*f->P[2][8] +
-            t->Phi[30]*f->P[3][8] + t->Phi[31]*f->P[4][8] + t->Phi[32]*f->P[5][8] +
-            t->Phi[33]*f->P[7][8] + t->Phi[34]*f->P[8][8] + t->Phi[35]*f->P[9][8] +
-            t->Phi[36]*f->P[10][8] + t->Phi[37]*f->P[11][8] + t->Phi[38]*f->P[12][8] +
-            t->Phi[39]*f->P[13][8] + t->Phi[40]*f->P[14][8] + t->Phi[41]*f->P[15][8] +
-            t->Phi[42]*f->P[18][8] + t->Phi[43]*f->P[19][8] + t->Phi[44]*f->P[20][8] +
-            t->Phi[45]*f->P[21][8] + t->Phi[46]*f->P[22][8] + t->Phi[47]*f->P[23][8] +
-            t->Phi[48]*f->P[24][8] + t->Phi[49]*f->P[25][8] + t->Phi[50]*f->P[26][8] +
-            t->Phi[51]*f->P[27][8] + t->Phi[52]*f->P[28][8] + t->Phi[53]*f->P[29][8];
-    w->M[9] = t->Phi[27]*f->P[0][9] + t->Phi[28]*f->P[1][9] + t->Phi[29]*f->P[2][9] +
-            t->Phi[30]*f->P[3][9] + t->Phi[31]*f->P[4][9] + t->Phi[32]*f->P[5][9] +
-            t->Phi[33]*f->P[7][9] + t->Phi[34]*f->P[8][9] + t->Phi[35]*f->P[9][9] +
-            t->Phi[36]*f->P[10][9] + t->Phi[37]*f->P[11][9] + t->Phi[38]*f->P[12][9] +
-            t->Phi[39]*f->P[13][9] + t->Phi[40]*f->P[14][9] + t->Phi[41]*f->P[15][9] +
-            t->Phi[42]*f->P[18][9] + t->Phi[43]*f->P[19][9] + t->Phi[44]*f->P[20][9] +
-            t->Phi[45]*f->P[21][9] + t->Phi[46]*f->P[22][9] + t->Phi[47]*f->P[23][9] +
-            t->Phi[48]*f->P[24][9] + t->Phi[49]*f->P[25][9] + t->Phi[50]*f->P[26][9] +
-            t->Phi[51]*f->P[27][9] + t->Phi[52]*f->P[28][9] + t->Phi[53]*f->P[29][9];
-    w->M[10] = t->Phi[27]*f->P[0][10] + t->Phi[28]*f->P[1][10] + t->Phi[29]*f->P[2][10] +
-            t->Phi[30]*f->P[3][10] + t->Phi[31]*f->P[4][10] + t->Phi[32]*f->P[5][10] +
-            t->Phi[33]*f->P[7][10] + t->Phi[34]*f->P[8][10] + t->Phi[35]*f->P[9][10] +
-            t->Phi[36]*f->P[10][10] + t->Phi[37]*f->P[11][10] + t->Phi[38]*f->P[12][10] +
-            t->Phi[39]*f->P[13][10] + t->Phi[40]*f->P[14][10] + t->Phi[41]*f->P[15][10] +
-            t->Phi[42]*f->P[18][10] + t->Phi[43]*f->P[19][10] + t->Phi[44]*f->P[20][10] +
-            t->Phi[45]*f->P[21][10] + t->Phi[46]*f->P[22][10] + t->Phi[47]*f->P[23][10] +
-            t->Phi[48]*f->P[24][10] + t->Phi[49]*f->P[25][10] + t->Phi[50]*f->P[26][10] +
-            t->Phi[51]*f->P[27][10] + t->Phi[52]*f->P[28][10] + t->Phi[53]*f->P[29][10];
-    w->M[11] = t->Phi[27]*f->P[0][11] + t->Phi[28]*f->P[1][11] + t->Phi[29]*f->P[2][11] +
-            t->Phi[30]*f->P[3][11] + t->Phi[31]*f->P[4][11] + t->Phi[32]*f->P[5][11] +
-            t->Phi[33]*f->P[7][11] + t->Phi[34]*f->P[8][11] + t->Phi[35]*f->P[9][11] +
-            t->Phi[36]*f->P[10][11] + t->Phi[37]*f->P[11][11] + t->Phi[38]*f->P[12][11] +
-            t->Phi[39]*f->P[13][11] + t->Phi[40]*f->P[14][11] + t->Phi[41]*f->P[15][11] +
-            t->Phi[42]*f->P[18][11] + t->Phi[43]*f->P[19][11] + t->Phi[44]*f->P[20][11] +
-            t->Phi[45]*f->P[21][11] + t->Phi[46]*f->P[22][11] + t->Phi[47]*f->P[23][11] +
-            t->Phi[48]*f->P[24][11] + t->Phi[49]*f->P[25][11] + t->Phi[50]*f->P[26][11] +
-            t->Phi[51]*f->P[27][11] + t->Phi[52]*f->P[28][11] + t->Phi[53]*f->P[29][11];
-    w->M[12] = t->Phi[27]*f->P[0][12] + t->Phi[28]*f->P[1][12] + t->Phi[29]*f->P[2][12] +
-            t->Phi[30]*f->P[3][12] + t->Phi[31]*f->P[4][12] + t->Phi[32]*f->P[5][12] +
-            t->Phi[33]*f->P[7][12] + t->Phi[34]*f->P[8][12] + t->Phi[35]*f->P[9][12] +
-            t->Phi[36]*f->P[10][12] + t->Phi[37]*f->P[11][12] + t->Phi[38]*f->P[12][12] +
-            t->Phi[39]*f->P[13][12] + t->Phi[40]*f->P[14][12] + t->Phi[41]*f->P[15][12] +
-            t->Phi[42]*f->P[18][12] + t->Phi[43]*f->P[19][12] + t->Phi[44]*f->P[20][12] +
-            t->Phi[45]*f->P[21][12] + t->Phi[46]*f->P[22][12] + t->Phi[47]*f->P[23][12] +
-            t->Phi[48]*f->P[24][12] + t->Phi[49]*f->P[25][12] + t->Phi[50]*f->P[26][12] +
-            t->Phi[51]*f->P[27][12] + t->Phi[52]*f->P[28][12] + t->Phi[53]*f->P[29][12];
-    w->M[13] = t->Phi[27]*f->P[0][13] + t->Phi[28]*f->P[1][13] + t->Phi[29]*f->P[2][13] +
-            t->Phi[30]*f->P[3][13] + t->Phi[31]*f->P[4][13] + t->Phi[32]*f->P[5][13] +
-            t->Phi[33]*f->P[7][13] + t->Phi[34]*f->P[8][13] + t->Phi[35]*f->P[9][13] +
-            t->Phi[36]*f->P[10][13] + t->Phi[37]*f->P[11][13] + t->Phi[38]*f->P[12][13] +
-            t->Phi[39]*f->P[13][13] + t->Phi[40]*f->P[14][13] + t->Phi[41]*f->P[15][13] +
-            t->Phi[42]*f->P[18][13] + t->Phi[43]*f->P[19][13] + t->Phi[44]*f->P[20][13] +
-            t->Phi[45]*f->P[21][13] + t->Phi[46]*f->P[22][13] + t->Phi[47]*f->P[23][13] +
-            t->Phi[48]*f->P[24][13] + t->Phi[49]*f->P[25][13] + t->Phi[50]*f->P[26][13] +
-            t->Phi[51]*f->P[27][13] + t->Phi[52]*f->P[28][13] + t->Phi[53]*f->P[29][13];
-    w->M[14] = t->Phi[27]*f->P[0][14] + t->Phi[28]*f->P[1][14] + t->Phi[29]*f->P[2][14] +
-            t->Phi[30]*f->P[3][14] + t->Phi[31]*f->P[4][14] + t->Phi[32]*f->P[5][14] +
-            t->Phi[33]*f->P[7][14] + t->Phi[34]*f->P[8][14] + t->Phi[35]*f->P[9][14] +
-            t->Phi[36]*f->P[10][14] + t->Phi[37]*f->P[11][14] + t->Phi[38]*f->P[12][14] +
-            t->Phi[39]*f->P[13][14] + t->Phi[40]*f->P[14][14] + t->Phi[41]*f->P[15][14] +
-            t->Phi[42]*f->P[18][14] + t->Phi[43]*f->P[19][14] + t->Phi[44]*f->P[20][14] +
-            t->Phi[45]*f->P[21][14] + t->Phi[46]*f->P[22][14] + t->Phi[47]*f->P[23][14] +
-            t->Phi[48]*f->P[24][14] + t->Phi[49]*f->P[25][14] + t->Phi[50]*f->P[26][14] +
-            t->Phi[51]*f->P[27][14] + t->Phi[52]*f->P[28][14] + t->Phi[53]*f->P[29][14];
-    w->M[15] = t->Phi[27]*f->P[0][15] + t->Phi[28]*f->P[1][15] + t->Phi[29]*f->P[2][15] +
-            t->Phi[30]*f->P[3][15] + t->Phi[31]*f->P[4][15] + t->Phi[32]*f->P[5][15] +
-            t->Phi[33]*f->P[7][15] + t->Phi[34]*f->P[8][15] + t->Phi[35]*f->P[9][15] +
-            t->Phi[36]*f->P[10][15] + t->Phi[37]*f->P[11][15] + t->Phi[38]*f->P[12][15] +
-            t->Phi[39]*f->P[13][15] + t->Phi[40]*f->P[14][15] + t->Phi[41]*f->P[15][15] +
-            t->Phi[42]*f->P[18][15] + t->Phi[43]*f->P[19][15] + t->Phi[44]*f->P[20][15] +
-            t->Phi[45]*f->P[21][15] + t->Phi[46]*f->P[22][15] + t->Phi[47]*f->P[23][15] +
-            t->Phi[48]*f->P[24][15] + t->Phi[49]*f->P[25][15] + t->Phi[50]*f->P[26][15] +
-            t->Phi[51]*f->P[27][15] + t->Phi[52]*f->P[28][15] + t->Phi[53]*f->P[29][15];
-    w->M[16] = t->Phi[27]*f->P[0][16] + t->Phi[28]*f->P[1][16] + t->Phi[29]*f->P[2][16] +
-            t->Phi[30]*f->P[3][16] + t->Phi[31]*f->P[4][16] + t->Phi[32]*f->P[5][16] +
-            t->Phi[33]*f->P[7][16] + t->Phi[34]*f->P[8][16] + t->Phi[35]*f->P[9][16] +
-            t->Phi[36]*f->P[10][16] + t->Phi[37]*f->P[11][16] + t->Phi[38]*f->P[12][16] +
-            t->Phi[39]*f->P[13][16] + t->Phi[40]*f->P[14][16] + t->Phi[41]*f->P[15][16] +
-            t->Phi[42]*f->P[18][16] + t->Phi[43]*f->P[19][16] + t->Phi[44]*f->P[20][16] +
-            t->Phi[45]*f->P[21][16] + t->Phi[46]*f->P[22][16] + t->Phi[47]*f->P[23][16] +
-            t->Phi[48]*f->P[24][16] + t->Phi[49]*f->P[25][16] + t->Phi[50]*f->P[26][16] +
-            t->Phi[51]*f->P[27][16] + t->Phi[52]*f->P[28][16] + t->Phi[53]*f->P[29][16];
-    w->M[17] = t->Phi[27]*f->P[0][17] + t->Phi[28]*f->P[1][17] + t->Phi[29]*f->P[2][17] +
-            t->Phi[30]*f->P[3][17] + t->Phi[31]*f->P[4][17] + t->Phi[32]*f->P[5][17] +
-            t->Phi[33]*f->P[7][17] + t->Phi[34]*f->P[8][17] + t->Phi[35]*f->P[9][17] +
-            t->Phi[36]*f->P[10][17] + t->Phi[37]*f->P[11][17] + t->Phi[38]*f->P[12][17] +
-            t->Phi[39]*f->P[13][17] + t->Phi[40]*f->P[14][17] + t->Phi[41]*f->P[15][17] +
-            t->Phi[42]*f->P[18][17] + t->Phi[43]*f->P[19][17] + t->Phi[44]*f->P[20][17] +
-            t->Phi[45]*f->P[21][17] + t->Phi[46]*f->P[22][17] + t->Phi[47]*f->P[23][17] +
-            t->Phi[48]*f->P[24][17] + t->Phi[49]*f->P[25][17] + t->Phi[50]*f->P[26][17] +
-            t->Phi[51]*f->P[27][17] + t->Phi[52]*f->P[28][17] + t->Phi[53]*f->P[29][17];
-    w->M[18] = t->Phi[27]*f->P[0][18] + t->Phi[28]*f->P[1][18] + t->Phi[29]*f->P[2][18] +
-            t->Phi[30]*f->P[3][18] + t->Phi[31]*f->P[4][18] + t->Phi[32]*f->P[5][18] +
-            t->Phi[33]*f->P[7][18] + t->Phi[34]*f->P[8][18] + t->Phi[35]*f->P[9][18] +
-            t->Phi[36]*f->P[10][18] + t->Phi[37]*f->P[11][18] + t->Phi[38]*f->P[12][18] +
-            t->Phi[39]*f->P[13][18] + t->Phi[40]*f->P[14][18] + t->Phi[41]*f->P[15][18] +
-            t->Phi[42]*f->P[18][18] + t->Phi[43]*f->P[19][18] + t->Phi[44]*f->P[20][18] +
-            t->Phi[45]*f->P[21][18] + t->Phi[46]*f->P[22][18] + t->Phi[47]*f->P[23][18] +
-            t->Phi[48]*f->P[24][18] + t->Phi[49]*f->P[25][18] + t->Phi[50]*f->P[26][18] +
-            t->Phi[51]*f->P[27][18] + t->Phi[52]*f->P[28][18] + t->Phi[53]*f->P[29][18];
-    w->M[19] = t->Phi[27]*f->P[0][19] + t->Phi[28]*f->P[1][19] + t->Phi[29]*f->P[2][19] +
-            t->Phi[30]*f->P[3][19] + t->Phi[31]*f->P[4][19] + t->Phi[32]*f->P[5][19] +
-            t->Phi[33]*f->P[7][19] + t->Phi[34]*f->P[8][19] + t->Phi[35]*f->P[9][19] +
-            t->Phi[36]*f->P[10][19] + t->Phi[37]*f->P[11][19] + t->Phi[38]*f->P[12][19] +
-            t->Phi[39]*f->P[13][19] + t->Phi[40]*f->P[14][19] + t->Phi[41]*f->P[15][19] +
-            t->Phi[42]*f->P[18][19] + t->Phi[43]*f->P[19][19] + t->Phi[44]*f->P[20][19] +
-            t->Phi[45]*f->P[21][19] + t->Phi[46]*f->P[22][19] + t->Phi[47]*f->P[23][19] +
-            t->Phi[48]*f->P[24][19] + t->Phi[49]*f->P[25][19] + t->Phi[50]*f->P[26][19] +
-            t->Phi[51]*f->P[27][19] + t->Phi[52]*f->P[28][19] + t->Phi[53]*f->P[29][19];
-    w->M[20] = t->Phi[27]*f->P[0][20] + t->Phi[28]*f->P[1][20] + t->Phi[29]*f->P[2][20] +
-            t->Phi[30]*f->P[3][20] + t->Phi[31]*f->P[4][20] + t->Phi[32]*f->P[5][20] +
-            t->Phi[33]*f->P[7][20] + t->Phi[34]*f->P[8][20] + t->Phi[35]*f->P[9][20] +
-            t->Phi[36]*f->P[10][20] + t->Phi[37]*f->P[11][20] + t->Phi[38]*f->P[12][20] +
-            t->Phi[39]*f->P[13][20] + t->Phi[40]*f->P[14][20] + t->Phi[41]*f->P[15][20] +
-            t->Phi[42]*f->P[18][20] + t->Phi[43]*f->P[19][20] + t->Phi[44]*f->P[20][20] +
-            t->Phi[45]*f->P[21][20] + t->Phi[46]*f->P[22][20] + t->Phi[47]*f->P[23][20] +
-            t->Phi[48]*f->P[24][20] + t->Phi[49]*f->P[25][20] + t->Phi[50]*f->P[26][20] +
-            t->Phi[51]*f->P[27][20] + t->Phi[52]*f->P[28][20] + t->Phi[53]*f->P[29][20];
-    w->M[21] = t->Phi[27]*f->P[0][21] + t->Phi[28]*f->P[1][21] + t->Phi[29]*f->P[2][21] +
-            t->Phi[30]*f->P[3][21] + t->Phi[31]*f->P[4][21] + t->Phi[32]*f->P[5][21] +
-            t->Phi[33]*f->P[7][21] + t->Phi[34]*f->P[8][21] + t->Phi[35]*f->P[9][21] +
-            t->Phi[36]*f->P[10][21] + t->Phi[37]*f->P[11][21] + t->Phi[38]*f->P[12][21] +
-            t->Phi[39]*f->P[13][21] + t->Phi[40]*f->P[14][21] + t->Phi[41]*f->P[15][21] +
-            t->Phi[42]*f->P[18][21] + t->Phi[43]*f->P[19][21] + t->Phi[44]*f->P[20][21] +
-            t->Phi[45]*f->P[21][21] + t->Phi[46]*f->P[22][21] + t->Phi[47]*f->P[23][21] +
-            t->Phi[48]*f->P[24][21] + t->Phi[49]*f->P[25][21] + t->Phi[50]*f->P[26][21] +
-            t->Phi[51]*f->P[27][21] + t->Phi[52]*f->P[28][21] + t->Phi[53]*f->P[29][21];
-    w->M[22] = t->Phi[27]*f->P[0][22] + t->Phi[28]*f->P[1][22] + t->Phi[29]*f->P[2][22] +
-            t->Phi[30]*f->P[3][22] + t->Phi[31]*f->P[4][22] + t->Phi[32]*f->P[5][22] +
-            t->Phi[33]*f->P[7][22] + t->Phi[34]*f->P[8][22] + t->Phi[35]*f->P[9][22] +
-            t->Phi[36]*f->P[10][22] + t->Phi[37]*f->P[11][22] + t->Phi[38]*f->P[12][22] +
-            t->Phi[39]*f->P[13][22] + t->Phi[40]*f->P[14][22] + t->Phi[41]*f->P[15][22] +
-            t->Phi[42]*f->P[18][22] + t->Phi[43]*f->P[19][22] + t->Phi[44]*f->P[20][22] +
-            t->Phi[45]*f->P[21][22] + t->Phi[46]*f->P[22][22] + t->Phi[47]*f->P[23][22] +
-            t->Phi[48]*f->P[24][22] + t->Phi[49]*f->P[25][22] + t->Phi[50]*f->P[26][22] +
-            t->Phi[51]*f->P[27][22] + t->Phi[52]*f->P[28][22] + t->Phi[53]*f->P[29][22];
-    w->M[23] = t->Phi[27]*f->P[0][23] + t->Phi[28]*f->P[1][23] + t->Phi[29]*f->P[2][23] +
-            t->Phi[30]*f->P[3][23] + t->Phi[31]*f->P[4][23] + t->Phi[32]*f->P[5][23] +
-            t->Phi[33]*f->P[7][23] + t->Phi[34]*f->P[8][23] + t->Phi[35]*f->P[9][23] +
-            t->Phi[36]*f->P[10][23] + t->Phi[37]*f->P[11][23] + t->Phi[38]*f->P[12][23] +
-            t->Phi[39]*f->P[13][23] + t->Phi[40]*f->P[14][23] + t->Phi[41]*f->P[15][23] +
-            t->Phi[42]*f->P[18][23] + t->Phi[43]*f->P[19][23] + t->Phi[44]*f->P[20][23] +
-            t->Phi[45]*f->P[21][23] + t->Phi[46]*f->P[22][23] + t->Phi[47]*f->P[23][23] +
-            t->Phi[48]*f->P[24][23] + t->Phi[49]*f->P[25][23] + t->Phi[50]*f->P[26][23] +
-            t->Phi[51]*f->P[27][23] + t->Phi[52]*f->P[28][23] + t->Phi[53]*f->P[29][23];
-    w->M[24] = t->Phi[27]*f->P[0][24] + t->Phi[28]*f->P[1][24] + t->Phi[29]*f->P[2][24] +
-            t->Phi[30]*f->P[3][24] + t->Phi[31]*f->P[4][24] + t->Phi[32]*f->P[5][24] +
-            t->Phi[33]*f->P[7][24] + t->Phi[34]*f->P[8][24] + t->Phi[35]*f->P[9][24] +
-            t->Phi[36]*f->P[10][24] + t->Phi[37]*f->P[11][24] + t->Phi[38]*f->P[12][24] +
-            t->Phi[39]*f->P[13][24] + t->Phi[40]*f->P[14][24] + t->Phi[41]*f->P[15][24] +
-            t->Phi[42]*f->P[18][24] + t->Phi[43]*f->P[19][24] + t->Phi[44]*f->P[20][24] +
-            t->Phi[45]*f->P[21][24] + t->Phi[46]*f->P[22][24] + t->Phi[47]*f->P[23][24] +
-            t->Phi[48]*f->P[24][24] + t->Phi[49]*f->P[25][24] + t->Phi[50]*f->P[26][24] +
-            t->Phi[51]*f->P[27][24] + t->Phi[52]*f->P[28][24] + t->Phi[53]*f->P[29][24];
-    w->M[25] = t->Phi[27]*f->P[0][25] + t->Phi[28]*f->P[1][25] + t->Phi[29]*f->P[2][25] +
-            t->Phi[30]*f->P[3][25] + t->Phi[31]*f->P[4][25] + t->Phi[32]*f->P[5][25] +
-            t->Phi[33]*f->P[7][25] + t->Phi[34]*f->P[8][25] + t->Phi[35]*f->P[9][25] +
-            t->Phi[36]*f->P[10][25] + t->Phi[37]*f->P[11][25] + t->Phi[38]*f->P[12][25] +
-            t->Phi[39]*f->P[13][25] + t->Phi[40]*f->P[14][25] + t->Phi[41]*f->P[15][25] +
-            t->Phi[42]*f->P[18][25] + t->Phi[43]*f->P[19][25] + t->Phi[44]*f->P[20][25] +
-            t->Phi[45]*f->P[21][25] + t->Phi[46]*f->P[22][25] + t->Phi[47]*f->P[23][25] +
-            t->Phi[48]*f->P[24][25] + t->Phi[49]*f->P[25][25] + t->Phi[50]*f->P[26][25] +
-            t->Phi[51]*f->P[27][25] + t->Phi[52]*f->P[28][25] + t->Phi[53]*f->P[29][25];
-    w->M[26] = t->Phi[27]*f->P[0][26] + t->Phi[28]*f->P[1][26] + t->Phi[29]*f->P[2][26] +
-            t->Phi[30]*f->P[3][26] + t->Phi[31]*f->P[4][26] + t->Phi[32]*f->P[5][26] +
-            t->Phi[33]*f->P[7][26] + t->Phi[34]*f->P[8][26] + t->Phi[35]*f->P[9][26] +
-            t->Phi[36]*f->P[10][26] + t->Phi[37]*f->P[11][26] + t->Phi[38]*f->P[12][26] +
-            t->Phi[39]*f->P[13][26] + t->Phi[40]*f->P[14][26] + t->Phi[41]*f->P[15][26] +
-            t->Phi[42]*f->P[18][26] + t->Phi[43]*f->P[19][26] + t->Phi[44]*f->P[20][26] +
-            t->Phi[45]*f->P[21][26] + t->Phi[46]*f->P[22][26] + t->Phi[47]*f->P[23][26] +
-            t->Phi[48]*f->P[24][26] + t->Phi[49]*f->P[25][26] + t->Phi[50]*f->P[26][26] +
-            t->Phi[51]*f->P[27][26] + t->Phi[52]*f->P[28][26] + t->Phi[53]*f->P[29][26];
-    w->M[27] = t->Phi[27]*f->P[0][27] + t->Phi[28]*f->P[1][27] + t->Phi[29]*f->P[2][27] +
-            t->Phi[30]*f->P[3][27] + t->Phi[31]*f->P[4][27] + t->Phi[32]*f->P[5][27] +
-            t->Phi[33]*f->P[7][27] + t->Phi[34]*f->P[8][27] + t->Phi[35]*f->P[9][27] +
-            t->Phi[36]*f->P[10][27] + t->Phi[37]*f->P[11][27] + t->Phi[38]*f->P[12][27] +
-            t->Phi[39]*f->P[13][27] + t->Phi[40]*f->P[14][27] + t->Phi[41]*f->P[15][27] +
-            t->Phi[42]*f->P[18][27] + t->Phi[43]*f->P[19][27] + t->Phi[44]*f->P[20][27] +
-            t->Phi[45]*f->P[21][27] + t->Phi[46]*f->P[22][27] + t->Phi[47]*f->P[23][27] +
-            t->Phi[48]*f->P[24][27] + t->Phi[49]*f->P[25][27] + t->Phi[50]*f->P[26][27] +
-            t->Phi[51]*f->P[27][27] + t->Phi[52]*f->P[28][27] + t->Phi[53]*f->P[29][27];
-    w->M[28] = t->Phi[27]*f->P[0][28] + t->Phi[28]*f->P[1][28] + t->Phi[29]*f->P[2][28] +
-            t->Phi[30]*f->P[3][28] + t->Phi[31]*f->P[4][28] + t->Phi[32]*f->P[5][28] +
-            t->Phi[33]*f->P[7][28] + t->Phi[34]*f->P[8][28] + t->Phi[35]*f->P[9][28] +
-            t->Phi[36]*f->P[10][28] + t->Phi[37]*f->P[11][28] + t->Phi[38]*f->P[12][28] +
-            t->Phi[39]*f->P[13][28] + t->Phi[40]*f->P[14][28] + t->Phi[41]*f->P[15][28] +
-            t->Phi[42]*f->P[18][28] + t->Phi[43]*f->P[19][28] + t->Phi[44]*f->P[20][28] +
-            t->Phi[45]*f->P[21][28] + t->Phi[46]*f->P[22][28] + t->Phi[47]*f->P[23][28] +
-            t->Phi[48]*f->P[24][28] + t->Phi[49]*f->P[25][28] + t->Phi[50]*f->P[26][28] +
-            t->Phi[51]*f->P[27][28] + t->Phi[52]*f->P[28][28] + t->Phi[53]*f->P[29][28];
-    w->M[29] = t->Phi[27]*f->P[0][29] + t->Phi[28]*f->P[1][29] + t->Phi[29]*f->P[2][29] +
-            t->Phi[30]*f->P[3][29] + t->Phi[31]*f->P[4][29] + t->Phi[32]*f->P[5][29] +
-            t->Phi[33]*f->P[7][29] + t->Phi[34]*f->P[8][29] + t->Phi[35]*f->P[9][29] +
-            t->Phi[36]*f->P[10][29] + t->Phi[37]*f->P[11][29] + t->Phi[38]*f->P[12][29] +
-            t->Phi[39]*f->P[13][29] + t->Phi[40]*f->P[14][29] + t->Phi[41]*f->P[15][29] +
-            t->Phi[42]*f->P[18][29] + t->Phi[43]*f->P[19][29] + t->Phi[44]*f->P[20][29] +
-            t->Phi[45]*f->P[21][29] + t->Phi[46]*f->P[22][29] + t->Phi[47]*f->P[23][29] +
-            t->Phi[48]*f->P[24][29] + t->Phi[49]*f->P[25][29] + t->Phi[50]*f->P[26][29] +
-            t->Phi[51]*f->P[27][29] + t->Phi[52]*f->P[28][29] + t->Phi[53]*f->P[29][29];
-    w->M[30] = t->Phi[27]*f->P[0][30] + t->Phi[28]*f->P[1][30] + t->Phi[29]*f->P[2][30] +
-            t->Phi[30]*f->P[3][30] + t->Phi[31]*f->P[4][30] + t->Phi[32]*f->P[5][30] +
-            t->Phi[33]*f->P[7][30] + t->Phi[34]*f->P[8][30] + t->Phi[35]*f->P[9][30] +
-            t->Phi[36]*f->P[10][30] + t->Phi[37]*f->P[11][30] + t->Phi[38]*f->P[12][30] +
-            t->Phi[39]*f->P[13][30] + t->Phi[40]*f->P[14][30] + t->Phi[41]*f->P[15][30] +
-            t->Phi[42]*f->P[18][30] + t->Phi[43]*f->P[19][30] + t->Phi[44]*f->P[20][30] +
-            t->Phi[45]*f->P[21][30] + t->Phi[46]*f->P[22][30] + t->Phi[47]*f->P[23][30] +
-            t->Phi[48]*f->P[24][30] + t->Phi[49]*f->P[25][30] + t->Phi[50]*f->P[26][30] +
-            t->Phi[51]*f->P[27][30] + t->Phi[52]*f->P[28][30] + t->Phi[53]*f->P[29][30];
-    w->M[31] = t->Phi[27]*f->P[0][31] + t->Phi[28]*f->P[1][31] + t->Phi[29]*f->P[2][31] +
-            t->Phi[30]*f->P[3][31] + t->Phi[31]*f->P[4][31] + t->Phi[32]*f->P[5][31] +
-            t->Phi[33]*f->P[7][31] + t->Phi[34]*f->P[8][31] + t->Phi[35]*f->P[9][31] +
-            t->Phi[36]*f->P[10][31] + t->Phi[37]*f->P[11][31] + t->Phi[38]*f->P[12][31] +
-            t->Phi[39]*f->P[13][31] + t->Phi[40]*f->P[14][31] + t->Phi[41]*f->P[15][31] +
-            t->Phi[42]*f->P[18][31] + t->Phi[43]*f->P[19][31] + t->Phi[44]*f->P[20][31] +
-            t->Phi[45]*f->P[21][31] + t->Phi[46]*f->P[22][31] + t->Phi[47]*f->P[23][31] +
-            t->Phi[48]*f->P[24][31] + t->Phi[49]*f->P[25][31] + t->Phi[50]*f->P[26][31] +
-            t->Phi[51]*f->P[27][31] + t->Phi[52]*f->P[28][31] + t->Phi[53]*f->P[29][31];
+    int c;
+    lane_pair b[27];
+    b[0] = lane_pair_of(t->Phi[27], t->Phi[27]);
+    b[1] = lane_pair_of(t->Phi[28], t->Phi[28]);
+    b[2] = lane_pair_of(t->Phi[29], t->Phi[29]);
+    b[3] = lane_pair_of(t->Phi[30], t->Phi[30]);
+    b[4] = lane_pair_of(t->Phi[31], t->Phi[31]);
+    b[5] = lane_pair_of(t->Phi[32], t->Phi[32]);
+    b[6] = lane_pair_of(t->Phi[33], t->Phi[33]);
+    b[7] = lane_pair_of(t->Phi[34], t->Phi[34]);
+    b[8] = lane_pair_of(t->Phi[35], t->Phi[35]);
+    b[9] = lane_pair_of(t->Phi[36], t->Phi[36]);
+    b[10] = lane_pair_of(t->Phi[37], t->Phi[37]);
+    b[11] = lane_pair_of(t->Phi[38], t->Phi[38]);
+    b[12] = lane_pair_of(t->Phi[39], t->Phi[39]);
+    b[13] = lane_pair_of(t->Phi[40], t->Phi[40]);
+    b[14] = lane_pair_of(t->Phi[41], t->Phi[41]);
+    b[15] = lane_pair_of(t->Phi[42], t->Phi[42]);
+    b[16] = lane_pair_of(t->Phi[43], t->Phi[43]);
+    b[17] = lane_pair_of(t->Phi[44], t->Phi[44]);
+    b[18] = lane_pair_of(t->Phi[45], t->Phi[45]);
+    b[19] = lane_pair_of(t->Phi[46], t->Phi[46]);
+    b[20] = lane_pair_of(t->Phi[47], t->Phi[47]);
+    b[21] = lane_pair_of(t->Phi[48], t->Phi[48]);
+    b[22] = lane_pair_of(t->Phi[49], t->Phi[49]);
+    b[23] = lane_pair_of(t->Phi[50], t->Phi[50]);
+    b[24] = lane_pair_of(t->Phi[51], t->Phi[51]);
+    b[25] = lane_pair_of(t->Phi[52], t->Phi[52]);
+    b[26] = lane_pair_of(t->Phi[53], t->Phi[53]);
+    for (c = 0; c + 1 < 32; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[18][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[19][c]));
+        acc = lane_pair_add_product(acc, b[17], lane_pair_load(&f->P[20][c]));
+        acc = lane_pair_add_product(acc, b[18], lane_pair_load(&f->P[21][c]));
+        acc = lane_pair_add_product(acc, b[19], lane_pair_load(&f->P[22][c]));
+        acc = lane_pair_add_product(acc, b[20], lane_pair_load(&f->P[23][c]));
+        acc = lane_pair_add_product(acc, b[21], lane_pair_load(&f->P[24][c]));
+        acc = lane_pair_add_product(acc, b[22], lane_pair_load(&f->P[25][c]));
+        acc = lane_pair_add_product(acc, b[23], lane_pair_load(&f->P[26][c]));
+        acc = lane_pair_add_product(acc, b[24], lane_pair_load(&f->P[27][c]));
+        acc = lane_pair_add_product(acc, b[25], lane_pair_load(&f->P[28][c]));
+        acc = lane_pair_add_product(acc, b[26], lane_pair_load(&f->P[29][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -4551,294 +4659,65 @@ NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_2(const ned_doppler32_augment
         f, const ned_doppler32_augmented_transition *restrict t,
         ned_doppler32_augmented_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[54]*f->P[0][0] + t->Phi[55]*f->P[1][0] + t->Phi[56]*f->P[2][0] +
-            t->Phi[57]*f->P[3][0] + t->Phi[58]*f->P[4][0] + t->Phi[59]*f->P[5][0] +
-            t->Phi[60]*f->P[7][0] + t->Phi[61]*f->P[8][0] + t->Phi[62]*f->P[9][0] +
-            t->Phi[63]*f->P[10][0] + t->Phi[64]*f->P[11][0] + t->Phi[65]*f->P[12][0] +
-            t->Phi[66]*f->P[13][0] + t->Phi[67]*f->P[14][0] + t->Phi[68]*f->P[15][0] +
-            t->Phi[69]*f->P[18][0] + t->Phi[70]*f->P[19][0] + t->Phi[71]*f->P[20][0] +
-            t->Phi[72]*f->P[21][0] + t->Phi[73]*f->P[22][0] + t->Phi[74]*f->P[23][0] +
-            t->Phi[75]*f->P[24][0] + t->Phi[76]*f->P[25][0] + t->Phi[77]*f->P[26][0] +
-            t->Phi[78]*f->P[27][0] + t->Phi[79]*f->P[28][0] + t->Phi[80]*f->P[29][0];
-    w->M[1] = t->Phi[54]*f->P[0][1] + t->Phi[55]*f->P[1][1] + t->Phi[56]*f->P[2][1] +
-            t->Phi[57]*f->P[3][1] + t->Phi[58]*f->P[4][1] + t->Phi[59]*f->P[5][1] +
-            t->Phi[60]*f->P[7][1] + t->Phi[61]*f->P[8][1] + t->Phi[62]*f->P[9][1] +
-            t->Phi[63]*f->P[10][1] + t->Phi[64]*f->P[11][1] + t->Phi[65]*f->P[12][1] +
-            t->Phi[66]*f->P[13][1] + t->Phi[67]*f->P[14][1] + t->Phi[68]*f->P[15][1] +
-            t->Phi[69]*f->P[18][1] + t->Phi[70]*f->P[19][1] + t->Phi[71]*f->P[20][1] +
-            t->Phi[72]*f->P[21][1] + t->Phi[73]*f->P[22][1] + t->Phi[74]*f->P[23][1] +
-            t->Phi[75]*f->P[24][1] + t->Phi[76]*f->P[25][1] + t->Phi[77]*f->P[26][1] +
-            t->Phi[78]*f->P[27][1] + t->Phi[79]*f->P[28][1] + t->Phi[80]*f->P[29][1];
-    w->M[2] = t->Phi[54]*f->P[0][2] + t->Phi[55]*f->P[1][2] + t->Phi[56]*f->P[2][2] +
-            t->Phi[57]*f->P[3][2] + t->Phi[58]*f->P[4][2] + t->Phi[59]*f->P[5][2] +
-            t->Phi[60]*f->P[7][2] + t->Phi[61]*f->P[8][2] + t->Phi[62]*f->P[9][2] +
-            t->Phi[63]*f->P[10][2] + t->Phi[64]*f->P[11][2] + t->Phi[65]*f->P[12][2] +
-            t->Phi[66]*f->P[13][2] + t->Phi[67]*f->P[14][2] + t->Phi[68]*f->P[15][2] +
-            t->Phi[69]*f->P[18][2] + t->Phi[70]*f->P[19][2] + t->Phi[71]*f->P[20][2] +
-            t->Phi[72]*f->P[21][2] + t->Phi[73]*f->P[22][2] + t->Phi[74]*f->P[23][2] +
-            t->Phi[75]*f->P[24][2] + t->Phi[76]*f->P[25][2] + t->Phi[77]*f->P[26][2] +
-            t->Phi[78]*f->P[27][2] + t->Phi[79]*f->P[28][2] + t->Phi[80]*f->P[29][2];
-    w->M[3] = t->Phi[54]*f->P[0][3] + t->Phi[55]*f->P[1][3] + t->Phi[56]*f->P[2][3] +
-            t->Phi[57]*f->P[3][3] + t->Phi[58]*f->P[4][3] + t->Phi[59]*f->P[5][3] +
-            t->Phi[60]*f->P[7][3] + t->Phi[61]*f->P[8][3] + t->Phi[62]*f->P[9][3] +
-            t->Phi[63]*f->P[10][3] + t->Phi[64]*f->P[11][3] + t->Phi[65]*f->P[12][3] +
-            t->Phi[66]*f->P[13][3] + t->Phi[67]*f->P[14][3] + t->Phi[68]*f->P[15][3] +
-            t->Phi[69]*f->P[18][3] + t->Phi[70]*f->P[19][3] + t->Phi[71]*f->P[20][3] +
-            t->Phi[72]*f->P[21][3] + t->Phi[73]*f->P[22][3] + t->Phi[74]*f->P[23][3] +
-            t->Phi[75]*f->P[24][3] + t->Phi[76]*f->P[25][3] + t->Phi[77]*f->P[26][3] +
-            t->Phi[78]*f->P[27][3] + t->Phi[79]*f->P[28][3] + t->Phi[80]*f->P[29][3];
-    w->M[4] = t->Phi[54]*f->P[0][4] + t->Phi[55]*f->P[1][4] + t->Phi[56]*f->P[2][4] +
-            t->Phi[57]*f->P[3][4] + t->Phi[58]*f->P[4][4] + t->Phi[59]*f->P[5][4] +
-            t->Phi[60]*f->P[7][4] + t->Phi[61]*f->P[8][4] + t->Phi[62]*f->P[9][4] +
-            t->Phi[63]*f->P[10][4] + t->Phi[64]*f->P[11][4] + t->Phi[65]*f->P[12][4] +
-            t->Phi[66]*f->P[13][4] + t->Phi[67]*f->P[14][4] + t->Phi[68]*f->P[15][4] +
-            t->Phi[69]*f->P[18][4] + t->Phi[70]*f->P[19][4] + t->Phi[71]*f->P[20][4] +
-            t->Phi[72]*f->P[21][4] + t->Phi[73]*f->P[22][4] + t->Phi[74]*f->P[23][4] +
-            t->Phi[75]*f->P[24][4] + t->Phi[76]*f->P[25][4] + t->Phi[77]*f->P[26][4] +
-            t->Phi[78]*f->P[27][4] + t->Phi[79]*f->P[28][4] + t->Phi[80]*f->P[29][4];
-    w->M[5] = t->Phi[54]*f->P[0][5] + t->Phi[55]*f->P[1][5] + t->Phi[56]*f->P[2][5] +
-            t->Phi[57]*f->P[3][5] + t->Phi[58]*f->P[4][5] + t->Phi[59]*f->P[5][5] +
-            t->Phi[60]*f->P[7][5] + t->Phi[61]*f->P[8][5] + t->Phi[62]*f->P[9][5] +
-            t->Phi[63]*f->P[10][5] + t->Phi[64]*f->P[11][5] + t->Phi[65]*f->P[12][5] +
-            t->Phi[66]*f->P[13][5] + t->Phi[67]*f->P[14][5] + t->Phi[68]*f->P[15][5] +
-            t->Phi[69]*f->P[18][5] + t->Phi[70]*f->P[19][5] + t->Phi[71]*f->P[20][5] +
-            t->Phi[72]*f->P[21][5] + t->Phi[73]*f->P[22][5] + t->Phi[74]*f->P[23][5] +
-            t->Phi[75]*f->P[24][5] + t->Phi[76]*f->P[25][5] + t->Phi[77]*f->P[26][5] +
-            t->Phi[78]*f->P[27][5] + t->Phi[79]*f->P[28][5] + t->Phi[80]*f->P[29][5];
-    w->M[6] = t->Phi[54]*f->P[0][6] + t->Phi[55]*f->P[1][6] + t->Phi[56]*f->P[2][6] +
-            t->Phi[57]*f->P[3][6] + t->Phi[58]*f->P[4][6] + t->Phi[59]*f->P[5][6] +
-            t->Phi[60]*f->P[7][6] + t->Phi[61]*f->P[8][6] + t->Phi[62]*f->P[9][6] +
-            t->Phi[63]*f->P[10][6] + t->Phi[64]*f->P[11][6] + t->Phi[65]*f->P[12][6] +
-            t->Phi[66]*f->P[13][6] + t->Phi[67]*f->P[14][6] + t->Phi[68]*f->P[15][6] +
-            t->Phi[69]*f->P[18][6] + t->Phi[70]*f->P[19][6] + t->Phi[71]*f->P[20][6] +
-            t->Phi[72]*f->P[21][6] + t->Phi[73]*f->P[22][6] + t->Phi[74]*f->P[23][6] +
-            t->Phi[75]*f->P[24][6] + t->Phi[76]*f->P[25][6] + t->Phi[77]*f->P[26][6] +
-            t->Phi[78]*f->P[27][6] + t->Phi[79]*f->P[28][6] + t->Phi[80]*f->P[29][6];
-    w->M[7] = t->Phi[54]*f->P[0][7] + t->Phi[55]*f->P[1][7] + t->Phi[56]*f->P[2][7] +
-            t->Phi[57]*f->P[3][7] + t->Phi[58]*f->P[4][7] + t->Phi[59]*f->P[5][7] +
-            t->Phi[60]*f->P[7][7] + t->Phi[61]*f->P[8][7] + t->Phi[62]*f->P[9][7] +
-            t->Phi[63]*f->P[10][7] + t->Phi[64]*f->P[11][7] + t->Phi[65]*f->P[12][7] +
-            t->Phi[66]*f->P[13][7] + t->Phi[67]*f->P[14][7] + t->Phi[68]*f->P[15][7] +
-            t->Phi[69]*f->P[18][7] + t->Phi[70]*f->P[19][7] + t->Phi[71]*f->P[20][7] +
-            t->Phi[72]*f->P[21][7] + t->Phi[73]*f->P[22][7] + t->Phi[74]*f->P[23][7] +
-            t->Phi[75]*f->P[24][7] + t->Phi[76]*f->P[25][7] + t->Phi[77]*f->P[26][7] +
-            t->Phi[78]*f->P[27][7] + t->Phi[79]*f->P[28][7] + t->Phi[80]*f->P[29][7];
-    w->M[8] = t->Phi[54]*f->P[0][8] + t->Phi[55]*f->P[1][8] + t->Phi[56]*f->P[2][8] +
-            t->Phi[57]*f->P[3][8] + t->Phi[58]*f->P[4][8] + t->Phi[59]*f->P[5][8] +
-            t->Phi[60]*f->P[7][8] + t->Phi[61]*f->P[8][8] + t->Phi[62]*f->P[9][8] +
-            t->Phi[63]*f->P[10][8] + t->Phi[64]*f->P[11][8] + t->Phi[65]*f->P[12][8] +
-            t->Phi[66]*f->P[13][8] + t->Phi[67]*f->P[14][8] + t->Phi[68]*f->P[15][8] +
-            t->Phi[69]*f->P[18][8] + t->Phi[70]*f->P[19][8] + t->Phi[71]*f->P[20][8] +
-            t->Phi[72]*f->P[21][8] + t->Phi[73]*f->P[22][8] + t->Phi[74]*f->P[23][8] +
-            t->Phi[75]*f->P[24][8] + t->Phi[76]*f->P[25][8] + t->Phi[77]*f->P[26][8] +
-            t->Phi[78]*f->P[27][8] + t->Phi[79]*f->P[28][8] + t->Phi[80]*f->P[29][8];
-    w->M[9] = t->Phi[54]*f->P[0][9] + t->Phi[55]*f->P[1][9] + t->Phi[56]*f->P[2][9] +
-            t->Phi[57]*f->P[3][9] + t->Phi[58]*f->P[4][9] + t->Phi[59]*f->P[5][9] +
-            t->Phi[60]*f->P[7][9] + t->Phi[61]*f->P[8][9] + t->Phi[62]*f->P[9][9] +
-            t->Phi[63]*f->P[10][9] + t->Phi[64]*f->P[11][9] + t->Phi[65]*f->P[12][9] +
-            t->Phi[66]*f->P[13][9] + t->Phi[67]*f->P[14][9] + t->Phi[68]*f->P[15][9] +
-            t->Phi[69]*f->P[18][9] + t->Phi[70]*f->P[19][9] + t->Phi[71]*f->P[20][9] +
-            t->Phi[72]*f->P[21][9] + t->Phi[73]*f->P[22][9] + t->Phi[74]*f->P[23][9] +
-            t->Phi[75]*f->P[24][9] + t->Phi[76]*f->P[25][9] + t->Phi[77]*f->P[26][9] +
-            t->Phi[78]*f->P[27][9] + t->Phi[79]*f->P[28][9] + t->Phi[80]*f->P[29][9];
-    w->M[10] = t->Phi[54]*f->P[0][10] + t->Phi[55]*f->P[1][10] + t->Phi[56]*f->P[2][10] +
-            t->Phi[57]*f->P[3][10] + t->Phi[58]*f->P[4][10] + t->Phi[59]*f->P[5][10] +
-            t->Phi[60]*f->P[7][10] + t->Phi[61]*f->P[8][10] + t->Phi[62]*f->P[9][10] +
-            t->Phi[63]*f->P[10][10] + t->Phi[64]*f->P[11][10] + t->Phi[65]*f->P[12][10] +
-            t->Phi[66]*f->P[13][10] + t->Phi[67]*f->P[14][10] + t->Phi[68]*f->P[15][10] +
-            t->Phi[69]*f->P[18][10] + t->Phi[70]*f->P[19][10] + t->Phi[71]*f->P[20][10] +
-            t->Phi[72]*f->P[21][10] + t->Phi[73]*f->P[22][10] + t->Phi[74]*f->P[23][10] +
-            t->Phi[75]*f->P[24][10] + t->Phi[76]*f->P[25][10] + t->Phi[77]*f->P[26][10] +
-            t->Phi[78]*f->P[27][10] + t->Phi[79]*f->P[28][10] + t->Phi[80]*f->P[29][10];
-    w->M[11] = t->Phi[54]*f->P[0][11] + t->Phi[55]*f->P[1][11] + t->Phi[56]*f->P[2][11] +
-            t->Phi[57]*f->P[3][11] + t->Phi[58]*f->P[4][11] + t->Phi[59]*f->P[5][11] +
-            t->Phi[60]*f->P[7][11] + t->Phi[61]*f->P[8][11] + t->Phi[62]*f->P[9][11] +
-            t->Phi[63]*f->P[10][11] + t->Phi[64]*f->P[11][11] + t->Phi[65]*f->P[12][11] +
-            t->Phi[66]*f->P[13][11] + t->Phi[67]*f->P[14][11] + t->Phi[68]*f->P[15][11] +
-            t->Phi[69]*f->P[18][11] + t->Phi[70]*f->P[19][11] + t->Phi[71]*f->P[20][11] +
-            t->Phi[72]*f->P[21][11] + t->Phi[73]*f->P[22][11] + t->Phi[74]*f->P[23][11] +
-            t->Phi[75]*f->P[24][11] + t->Phi[76]*f->P[25][11] + t->Phi[77]*f->P[26][11] +
-            t->Phi[78]*f->P[27][11] + t->Phi[79]*f->P[28][11] + t->Phi[80]*f->P[29][11];
-    w->M[12] = t->Phi[54]*f->P[0][12] + t->Phi[55]*f->P[1][12] + t->Phi[56]*f->P[2][12] +
-            t->Phi[57]*f->P[3][12] + t->Phi[58]*f->P[4][12] + t->Phi[59]*f->P[5][12] +
-            t->Phi[60]*f->P[7][12] + t->Phi[61]*f->P[8][12] + t->Phi[62]*f->P[9][12] +
-            t->Phi[63]*f->P[10][12] + t->Phi[64]*f->P[11][12] + t->Phi[65]*f->P[12][12] +
-            t->Phi[66]*f->P[13][12] + t->Phi[67]*f->P[14][12] + t->Phi[68]*f->P[15][12] +
-            t->Phi[69]*f->P[18][12] + t->Phi[70]*f->P[19][12] + t->Phi[71]*f->P[20][12] +
-            t->Phi[72]*f->P[21][12] + t->Phi[73]*f->P[22][12] + t->Phi[74]*f->P[23][12] +
-            t->Phi[75]*f->P[24][12] + t->Phi[76]*f->P[25][12] + t->Phi[77]*f->P[26][12] +
-            t->Phi[78]*f->P[27][12] + t->Phi[79]*f->P[28][12] + t->Phi[80]*f->P[29][12];
-    w->M[13] = t->Phi[54]*f->P[0][13] + t->Phi[55]*f->P[1][13] + t->Phi[56]*f->P[2][13] +
-            t->Phi[57]*f->P[3][13] + t->Phi[58]*f->P[4][13] + t->Phi[59]*f->P[5][13] +
-            t->Phi[60]*f->P[7][13] + t->Phi[61]*f->P[8][13] + t->Phi[62]*f->P[9][13] +
-            t->Phi[63]*f->P[10][13] + t->Phi[64]*f->P[11][13] + t->Phi[65]*f->P[12][13] +
-            t->Phi[66]*f->P[13][13] + t->Phi[67]*f->P[14][13] + t->Phi[68]*f->P[15][13] +
-            t->Phi[69]*f->P[18][13] + t->Phi[70]*f->P[19][13] + t->Phi[71]*f->P[20][13] +
-            t->Phi[72]*f->P[21][13] + t->Phi[73]*f->P[22][13] + t->Phi[74]*f->P[23][13] +
-            t->Phi[75]*f->P[24][13] + t->Phi[76]*f->P[25][13] + t->Phi[77]*f->P[26][13] +
-            t->Phi[78]*f->P[27][13] + t->Phi[79]*f->P[28][13] + t->Phi[80]*f->P[29][13];
-    w->M[14] = t->Phi[54]*f->P[0][14] + t->Phi[55]*f->P[1][14] + t->Phi[56]*f->P[2][14] +
-            t->Phi[57]*f->P[3][14] + t->Phi[58]*f->P[4][14] + t->Phi[59]*f->P[5][14] +
-            t->Phi[60]*f->P[7][14] + t->Phi[61]*f->P[8][14] + t->Phi[62]*f->P[9][14] +
-            t->Phi[63]*f->P[10][14] + t->Phi[64]*f->P[11][14] + t->Phi[65]*f->P[12][14] +
-            t->Phi[66]*f->P[13][14] + t->Phi[67]*f->P[14][14] + t->Phi[68]*f->P[15][14] +
-            t->Phi[69]*f->P[18][14] + t->Phi[70]*f->P[19][14] + t->Phi[71]*f->P[20][14] +
-            t->Phi[72]*f->P[21][14] + t->Phi[73]*f->P[22][14] + t->Phi[74]*f->P[23][14] +
-            t->Phi[75]*f->P[24][14] + t->Phi[76]*f->P[25][14] + t->Phi[77]*f->P[26][14] +
-            t->Phi[78]*f->P[27][14] + t->Phi[79]*f->P[28][14] + t->Phi[80]*f->P[29][14];
-    w->M[15] = t->Phi[54]*f->P[0][15] + t->Phi[55]*f->P[1][15] + t->Phi[56]*f->P[2][15] +
-            t->Phi[57]*f->P[3][15] + t->Phi[58]*f->P[4][15] + t->Phi[59]*f->P[5][15] +
-            t->Phi[60]*f->P[7][15] + t->Phi[61]*f->P[8][15] + t->Phi[62]*f->P[9][15] +
-            t->Phi[63]*f->P[10][15] + t->Phi[64]*f->P[11][15] + t->Phi[65]*f->P[12][15] +
-            t->Phi[66]*f->P[13][15] + t->Phi[67]*f->P[14][15] + t->Phi[68]*f->P[15][15] +
-            t->Phi[69]*f->P[18][15] + t->Phi[70]*f->P[19][15] + t->Phi[71]*f->P[20][15] +
-            t->Phi[72]*f->P[21][15] + t->Phi[73]*f->P[22][15] + t->Phi[74]*f->P[23][15] +
-            t->Phi[75]*f->P[24][15] + t->Phi[76]*f->P[25][15] + t->Phi[77]*f->P[26][15] +
-            t->Phi[78]*f->P[27][15] + t->Phi[79]*f->P[28][15] + t->Phi[80]*f->P[29][15];
-    w->M[16] = t->Phi[54]*f->P[0][16] + t->Phi[55]*f->P[1][16] + t->Phi[56]*f->P[2][16] +
-            t->Phi[57]*f->P[3][16] + t->Phi[58]*f->P[4][16] + t->Phi[59]*f->P[5][16] +
-            t->Phi[60]*f->P[7][16] + t->Phi[61]*f->P[8][16] + t->Phi[62]*f->P[9][16] +
-            t->Phi[63]*f->P[10][16] + t->Phi[64]*f->P[11][16] + t->Phi[65]*f->P[12][16] +
-            t->Phi[66]*f->P[13][16] + t->Phi[67]*f->P[14][16] + t->Phi[68]*f->P[15][16] +
-            t->Phi[69]*f->P[18][16] + t->Phi[70]*f->P[19][16] + t->Phi[71]*f->P[20][16] +
-            t->Phi[72]*f->P[21][16] + t->Phi[73]*f->P[22][16] + t->Phi[74]*f->P[23][16] +
-            t->Phi[75]*f->P[24][16] + t->Phi[76]*f->P[25][16] + t->Phi[77]*f->P[26][16] +
-            t->Phi[78]*f->P[27][16] + t->Phi[79]*f->P[28][16] + t->Phi[80]*f->P[29][16];
-    w->M[17] = t->Phi[54]*f->P[0][17] + t->Phi[55]*f->P[1][17] + t->Phi[56]*f->P[2][17] +
-            t->Phi[57]*f->P[3][17] + t->Phi[58]*f->P[4][17] + t->Phi[59]*f->P[5][17] +
-            t->Phi[60]*f->P[7][17] + t->Phi[61]*f->P[8][17] + t->Phi[62]*f->P[9][17] +
-            t->Phi[63]*f->P[10][17] + t->Phi[64]*f->P[11][17] + t->Phi[65]*f->P[12][17] +
-            t->Phi[66]*f->P[13][17] + t->Phi[67]*f->P[14][17] + t->Phi[68]*f->P[15][17] +
-            t->Phi[69]*f->P[18][17] + t->Phi[70]*f->P[19][17] + t->Phi[71]*f->P[20][17] +
-            t->Phi[72]*f->P[21][17] + t->Phi[73]*f->P[22][17] + t->Phi[74]*f->P[23][17] +
-            t->Phi[75]*f->P[24][17] + t->Phi[76]*f->P[25][17] + t->Phi[77]*f->P[26][17] +
-            t->Phi[78]*f->P[27][17] + t->Phi[79]*f->P[28][17] + t->Phi[80]*f->P[29][17];
-    w->M[18] = t->Phi[54]*f->P[0][18] + t->Phi[55]*f->P[1][18] + t->Phi[56]*f->P[2][18] +
-            t->Phi[57]*f->P[3][18] + t->Phi[58]*f->P[4][18] + t->Phi[59]*f->P[5][18] +
-            t->Phi[60]*f->P[7][18] + t->Phi[61]*f->P[8][18] + t->Phi[62]*f->P[9][18] +
-            t->Phi[63]*f->P[10][18] + t->Phi[64]*f->P[11][18] + t->Phi[65]*f->P[12][18] +
-            t->Phi[66]*f->P[13][18] + t->Phi[67]*f->P[14][18] + t->Phi[68]*f->P[15][18] +
-            t->Phi[69]*f->P[18][18] + t->Phi[70]*f->P[19][18] + t->Phi[71]*f->P[20][18] +
-            t->Phi[72]*f->P[21][18] + t->Phi[73]*f->P[22][18] + t->Phi[74]*f->P[23][18] +
-            t->Phi[75]*f->P[24][18] + t->Phi[76]*f->P[25][18] + t->Phi[77]*f->P[26][18] +
-            t->Phi[78]*f->P[27][18] + t->Phi[79]*f->P[28][18] + t->Phi[80]*f->P[29][18];
-    w->M[19] = t->Phi[54]*f->P[0][19] + t->Phi[55]*f->P[1][19] + t->Phi[56]*f->P[2][19] +
-            t->Phi[57]*f->P[3][19] + t->Phi[58]*f->P[4][19] + t->Phi[59]*f->P[5][19] +
-            t->Phi[60]*f->P[7][19] + t->Phi[61]*f->P[8][19] + t->Phi[62]*f->P[9][19] +
-            t->Phi[63]*f->P[10][19] + t->Phi[64]*f->P[11][19] + t->Phi[65]*f->P[12][19] +
-            t->Phi[66]*f->P[13][19] + t->Phi[67]*f->P[14][19] + t->Phi[68]*f->P[15][19] +
-            t->Phi[69]*f->P[18][19] + t->Phi[70]*f->P[19][19] + t->Phi[71]*f->P[20][19] +
-            t->Phi[72]*f->P[21][19] + t->Phi[73]*f->P[22][19] + t->Phi[74]*f->P[23][19] +
-            t->Phi[75]*f->P[24][19] + t->Phi[76]*f->P[25][19] + t->Phi[77]*f->P[26][19] +
-            t->Phi[78]*f->P[27][19] + t->Phi[79]*f->P[28][19] + t->Phi[80]*f->P[29][19];
-    w->M[20] = t->Phi[54]*f->P[0][20] + t->Phi[55]*f->P[1][20] + t->Phi[56]*f->P[2][20] +
-            t->Phi[57]*f->P[3][20] + t->Phi[58]*f->P[4][20] + t->Phi[59]*f->P[5][20] +
-            t->Phi[60]*f->P[7][20] + t->Phi[61]*f->P[8][20] + t->Phi[62]*f->P[9][20] +
-            t->Phi[63]*f->P[10][20] + t->Phi[64]*f->P[11][20] + t->Phi[65]*f->P[12][20] +
-            t->Phi[66]*f->P[13][20] + t->Phi[67]*f->P[14][20] + t->Phi[68]*f->P[15][20] +
-            t->Phi[69]*f->P[18][20] + t->Phi[70]*f->P[19][20] + t->Phi[71]*f->P[20][20] +
-            t->Phi[72]*f->P[21][20] + t->Phi[73]*f->P[22][20] + t->Phi[74]*f->P[23][20] +
-            t->Phi[75]*f->P[24][20] + t->Phi[76]*f->P[25][20] + t->Phi[77]*f->P[26][20] +
-            t->Phi[78]*f->P[27][20] + t->Phi[79]*f->P[28][20] + t->Phi[80]*f->P[29][20];
-    w->M[21] = t->Phi[54]*f->P[0][21] + t->Phi[55]*f->P[1][21] + t->Phi[56]*f->P[2][21] +
-            t->Phi[57]*f->P[3][21] + t->Phi[58]*f->P[4][21] + t->Phi[59]*f->P[5][21] +
-            t->Phi[60]*f->P[7][21] + t->Phi[61]*f->P[8][21] + t->Phi[62]*f->P[9][21] +
-            t->Phi[63]*f->P[10][21] + t->Phi[64]*f->P[11][21] + t->Phi[65]*f->P[12][21] +
-            t->Phi[66]*f->P[13][21] + t->Phi[67]*f->P[14][21] + t->Phi[68]*f->P[15][21] +
-            t->Phi[69]*f->P[18][21] + t->Phi[70]*f->P[19][21] + t->Phi[71]*f->P[20][21] +
-            t->Phi[72]*f->P[21][21] + t->Phi[73]*f->P[22][21] + t->Phi[74]*f->P[23][21] +
-            t->Phi[75]*f->P[24][21] + t->Phi[76]*f->P[25][21] + t->Phi[77]*f->P[26][21] +
-            t->Phi[78]*f->P[27][21] + t->Phi[79]*f->P[28][21] + t->Phi[80]*f->P[29][21];
-    w->M[22] = t->Phi[54]*f->P[0][22] + t->Phi[55]*f->P[1][22] + t->Phi[56]*f->P[2][22] +
-            t->Phi[57]*f->P[3][22] + t->Phi[58]*f->P[4][22] + t->Phi[59]*f->P[5][22] +
-            t->Phi[60]*f->P[7][22] + t->Phi[61]*f->P[8][22] + t->Phi[62]*f->P[9][22] +
-            t->Phi[63]*f->P[10][22] + t->Phi[64]*f->P[11][22] + t->Phi[65]*f->P[12][22] +
-            t->Phi[66]*f->P[13][22] + t->Phi[67]*f->P[14][22] + t->Phi[68]*f->P[15][22] +
-            t->Phi[69]*f->P[18][22] + t->Phi[70]*f->P[19][22] + t->Phi[71]*f->P[20][22] +
-            t->Phi[72]*f->P[21][22] + t->Phi[73]*f->P[22][22] + t->Phi[74]*f->P[23][22] +
-            t->Phi[75]*f->P[24][22] + t->Phi[76]*f->P[25][22] + t->Phi[77]*f->P[26][22] +
-            t->Phi[78]*f->P[27][22] + t->Phi[79]*f->P[28][22] + t->Phi[80]*f->P[29][22];
-    w->M[23] = t->Phi[54]*f->P[0][23] + t->Phi[55]*f->P[1][23] + t->Phi[56]*f->P[2][23] +
-            t->Phi[57]*f->P[3][23] + t->Phi[58]*f->P[4][23] + t->Phi[59]*f->P[5][23] +
-            t->Phi[60]*f->P[7][23] + t->Phi[61]*f->P[8][23] + t->Phi[62]*f->P[9][23] +
-            t->Phi[63]*f->P[10][23] + t->Phi[64]*f->P[11][23] + t->Phi[65]*f->P[12][23] +
-            t->Phi[66]*f->P[13][23] + t->Phi[67]*f->P[14][23] + t->Phi[68]*f->P[15][23] +
-            t->Phi[69]*f->P[18][23] + t->Phi[70]*f->P[19][23] + t->Phi[71]*f->P[20][23] +
-            t->Phi[72]*f->P[21][23] + t->Phi[73]*f->P[22][23] + t->Phi[74]*f->P[23][23] +
-            t->Phi[75]*f->P[24][23] + t->Phi[76]*f->P[25][23] + t->Phi[77]*f->P[26][23] +
-            t->Phi[78]*f->P[27][23] + t->Phi[79]*f->P[28][23] + t->Phi[80]*f->P[29][23];
-    w->M[24] = t->Phi[54]*f->P[0][24] + t->Phi[55]*f->P[1][24] + t->Phi[56]*f->P[2][24] +
-            t->Phi[57]*f->P[3][24] + t->Phi[58]*f->P[4][24] + t->Phi[59]*f->P[5][24] +
-            t->Phi[60]*f->P[7][24] + t->Phi[61]*f->P[8][24] + t->Phi[62]*f->P[9][24] +
-            t->Phi[63]*f->P[10][24] + t->Phi[64]*f->P[11][24] + t->Phi[65]*f->P[12][24] +
-            t->Phi[66]*f->P[13][24] + t->Phi[67]*f->P[14][24] + t->Phi[68]*f->P[15][24] +
-            t->Phi[69]*f->P[18][24] + t->Phi[70]*f->P[19][24] + t->Phi[71]*f->P[20][24] +
-            t->Phi[72]*f->P[21][24] + t->Phi[73]*f->P[22][24] + t->Phi[74]*f->P[23][24] +
-            t->Phi[75]*f->P[24][24] + t->Phi[76]*f->P[25][24] + t->Phi[77]*f->P[26][24] +
-            t->Phi[78]*f->P[27][24] + t->Phi[79]*f->P[28][24] + t->Phi[80]*f->P[29][24];
-    w->M[25] = t->Phi[54]*f->P[0][25] + t->Phi[55]*f->P[1][25] + t->Phi[56]*f->P[2][25] +
-            t->Phi[57]*f->P[3][25] + t->Phi[58]*f->P[4][25] + t->Phi[59]*f->P[5][25] +
-            t->Phi[60]*f->P[7][25] + t->Phi[61]*f->P[8][25] + t->Phi[62]*f->P[9][25] +
-            t->Phi[63]*f->P[10][25] + t->Phi[64]*f->P[11][25] + t->Phi[65]*f->P[12][25] +
-            t->Phi[66]*f->P[13][25] + t->Phi[67]*f->P[14][25] + t->Phi[68]*f->P[15][25] +
-            t->Phi[69]*f->P[18][25] + t->Phi[70]*f->P[19][25] + t->Phi[71]*f->P[20][25] +
-            t->Phi[72]*f->P[21][25] + t->Phi[73]*f->P[22][25] + t->Phi[74]*f->P[23][25] +
-            t->Phi[75]*f->P[24][25] + t->Phi[76]*f->P[25][25] + t->Phi[77]*f->P[26][25] +
-            t->Phi[78]*f->P[27][25] + t->Phi[79]*f->P[28][25] + t->Phi[80]*f->P[29][25];
-    w->M[26] = t->Phi[54]*f->P[0][26] + t->Phi[55]*f->P[1][26] + t->Phi[56]*f->P[2][26] +
-            t->Phi[57]*f->P[3][26] + t->Phi[58]*f->P[4][26] + t->Phi[59]*f->P[5][26] +
-            t->Phi[60]*f->P[7][26] + t->Phi[61]*f->P[8][26] + t->Phi[62]*f->P[9][26] +
-            t->Phi[63]*f->P[10][26] + t->Phi[64]*f->P[11][26] + t->Phi[65]*f->P[12][26] +
-            t->Phi[66]*f->P[13][26] + t->Phi[67]*f->P[14][26] + t->Phi[68]*f->P[15][26] +
-            t->Phi[69]*f->P[18][26] + t->Phi[70]*f->P[19][26] + t->Phi[71]*f->P[20][26] +
-            t->Phi[72]*f->P[21][26] + t->Phi[73]*f->P[22][26] + t->Phi[74]*f->P[23][26] +
-            t->Phi[75]*f->P[24][26] + t->Phi[76]*f->P[25][26] + t->Phi[77]*f->P[26][26] +
-            t->Phi[78]*f->P[27][26] + t->Phi[79]*f->P[28][26] + t->Phi[80]*f->P[29][26];
-    w->M[27] = t->Phi[54]*f->P[0][27] + t->Phi[55]*f->P[1][27] + t->Phi[56]*f->P[2][27] +
-            t->Phi[57]*f->P[3][27] + t->Phi[58]*f->P[4][27] + t->Phi[59]*f->P[5][27] +
-            t->Phi[60]*f->P[7][27] + t->Phi[61]*f->P[8][27] + t->Phi[62]*f->P[9][27] +
-            t->Phi[63]*f->P[10][27] + t->Phi[64]*f->P[11][27] + t->Phi[65]*f->P[12][27] +
-            t->Phi[66]*f->P[13][27] + t->Phi[67]*f->P[14][27] + t->Phi[68]*f->P[15][27] +
-            t->Phi[69]*f->P[18][27] + t->Phi[70]*f->P[19][27] + t->Phi[71]*f->P[20][27] +
-            t->Phi[72]*f->P[21][27] + t->Phi[73]*f->P[22][27] + t->Phi[74]*f->P[23][27] +
-            t->Phi[75]*f->P[24][27] + t->Phi[76]*f->P[25][27] + t->Phi[77]*f->P[26][27] +
-            t->Phi[78]*f->P[27][27] + t->Phi[79]*f->P[28][27] + t->Phi[80]*f->P[29][27];
-    w->M[28] = t->Phi[54]*f->P[0][28] + t->Phi[55]*f->P[1][28] + t->Phi[56]*f->P[2][28] +
-            t->Phi[57]*f->P[3][28] + t->Phi[58]*f->P[4][28] + t->Phi[59]*f->P[5][28] +
-            t->Phi[60]*f->P[7][28] + t->Phi[61]*f->P[8][28] + t->Phi[62]*f->P[9][28] +
-            t->Phi[63]*f->P[10][28] + t->Phi[64]*f->P[11][28] + t->Phi[65]*f->P[12][28] +
-            t->Phi[66]*f->P[13][28] + t->Phi[67]*f->P[14][28] + t->Phi[68]*f->P[15][28] +
-            t->Phi[69]*f->P[18][28] + t->Phi[70]*f->P[19][28] + t->Phi[71]*f->P[20][28] +
-            t->Phi[72]*f->P[21][28] + t->Phi[73]*f->P[22][28] + t->Phi[74]*f->P[23][28] +
-            t->Phi[75]*f->P[24][28] + t->Phi[76]*f->P[25][28] + t->Phi[77]*f->P[26][28] +
-            t->Phi[78]*f->P[27][28] + t->Phi[79]*f->P[28][28] + t->Phi[80]*f->P[29][28];
-    w->M[29] = t->Phi[54]*f->P[0][29] + t->Phi[55]*f->P[1][29] + t->Phi[56]*f->P[2][29] +
-            t->Phi[57]*f->P[3][29] + t->Phi[58]*f->P[4][29] + t->Phi[59]*f->P[5][29] +
-            t->Phi[60]*f->P[7][29] + t->Phi[61]*f->P[8][29] + t->Phi[62]*f->P[9][29] +
-            t->Phi[63]*f->P[10][29] + t->Phi[64]*f->P[11][29] + t->Phi[65]*f->P[12][29] +
-            t->Phi[66]*f->P[13][29] + t->Phi[67]*f->P[14][29] + t->Phi[68]*f->P[15][29] +
-            t->Phi[69]*f->P[18][29] + t->Phi[70]*f->P[19][29] + t->Phi[71]*f->P[20][29] +
-            t->Phi[72]*f->P[21][29] + t->Phi[73]*f->P[22][29] + t->Phi[74]*f->P[23][29] +
-            t->Phi[75]*f->P[24][29] + t->Phi[76]*f->P[25][29] + t->Phi[77]*f->P[26][29] +
-            t->Phi[78]*f->P[27][29] + t->Phi[79]*f->P[28][29] + t->Phi[80]*f->P[29][29];
-    w->M[30] = t->Phi[54]*f->P[0][30] + t->Phi[55]*f->P[1][30] + t->Phi[56]*f->P[2][30] +
-            t->Phi[57]*f->P[3][30] + t->Phi[58]*f->P[4][30] + t->Phi[59]*f->P[5][30] +
-            t->Phi[60]*f->P[7][30] + t->Phi[61]*f->P[8][30] + t->Phi[62]*f->P[9][30] +
-            t->Phi[63]*f->P[10][30] + t->Phi[64]*f->P[11][30] + t->Phi[65]*f->P[12][30] +
-            t->Phi[66]*f->P[13][30] + t->Phi[67]*f->P[14][30] + t->Phi[68]*f->P[15][30] +
-            t->Phi[69]*f->P[18][30] + t->Phi[70]*f->P[19][30] + t->Phi[71]*f->P[20][30] +
-            t->Phi[72]*f->P[21][30] + t->Phi[73]*f->P[22][30] + t->Phi[74]*f->P[23][30] +
-            t->Phi[75]*f->P[24][30] + t->Phi[76]*f->P[25][30] + t->Phi[77]*f->P[26][30] +
-            t->Phi[78]*f->P[27][30] + t->Phi[79]*f->P[28][30] + t->Phi[80]*f->P[29][30];
-    w->M[31] = t->Phi[54]*f->P[0][31] + t->Phi[55]*f->P[1][31] + t->Phi[56]*f->P[2][31] +
-            t->Phi[57]*f->P[3][31] + t->Phi[58]*f->P[4][31] + t->Phi[59]*f->P[5][31] +
-            t->Phi[60]*f->P[7][31] + t->Phi[61]*f->P[8][31] + t->Phi[62]*f->P[9][31] +
-            t->Phi[63]*f->P[10][31] + t->Phi[64]*f->P[11][31] + t->Phi[65]*f->P[12][31] +
-            t->Phi[66]*f->P[13][31] + t->Phi[67]*f->P[14][31] + t->Phi[68]*f->P[15][31] +
-            t->Phi[69]*f->P[18][31] + t->Phi[70]*f->P[19][31] + t->Phi[71]*f->P[20][31] +
-            t->Phi[72]*f->P[21][31] + t->Phi[73]*f->P[22][31] + t->Phi[74]*f->P[23][31] +
-            t->Phi[75]*f->P[24][31] + t->Phi[76]*f->P[25][31] + t->Phi[77]*f->P[26][31] +
-            t->Phi[78]*f->P[27][31] + t->Phi[79]*f->P[28][31] + t->Phi[80]*f->P[29][31];
+    int c;
+    lane_pair b[27];
+    b[0] = lane_pair_of(t->Phi[54], t->Phi[54]);
+    b[1] = lane_pair_of(t->Phi[55], t->Phi[55]);
+    b[2] = lane_pair_of(t->Phi[56], t->Phi[56]);
+    b[3] = lane_pair_of(t->Phi[57], t->Phi[57]);
+    b[4] = lane_pair_of(t->Phi[58], t->Phi[58]);
+    b[5] = lane_pair_of(t->Phi[59], t->Phi[59]);
+    b[6] = lane_pair_of(t->Phi[60], t->Phi[60]);
+    b[7] = lane_pair_of(t->Phi[61], t->Phi[61]);
+    b[8] = lane_pair_of(t->Phi[62], t->Phi[62]);
+    b[9] = lane_pair_of(t->Phi[63], t->Phi[63]);
+    b[10] = lane_pair_of(t->Phi[64], t->Phi[64]);
+    b[11] = lane_pair_of(t->Phi[65], t->Phi[65]);
+    b[12] = lane_pair_of(t->Phi[66], t->Phi[66]);
+    b[13] = lane_pair_of(t->Phi[67], t->Phi[67]);
+    b[14] = lane_pair_of(t->Phi[68], t->Phi[68]);
+    b[15] = lane_pair_of(t->Phi[69], t->Phi[69]);
+    b[16] = lane_pair_of(t->Phi[70], t->Phi[70]);
+    b[17] = lane_pair_of(t->Phi[71], t->Phi[71]);
+    b[18] = lane_pair_of(t->Phi[72], t->Phi[72]);
+    b[19] = lane_pair_of(t->Phi[73], t->Phi[73]);
+    b[20] = lane_pair_of(t->Phi[74], t->Phi[74]);
+    b[21] = lane_pair_of(t->Phi[75], t->Phi[75]);
+    b[22] = lane_pair_of(t->Phi[76], t->Phi[76]);
+    b[23] = lane_pair_of(t->Phi[77], t->Phi[77]);
+    b[24] = lane_pair_of(t->Phi[78], t->Phi[78]);
+    b[25] = lane_pair_of(t->Phi[79], t->Phi[79]);
+    b[26] = lane_pair_of(t->Phi[80], t->Phi[80]);
+    for (c = 0; c + 1 < 32; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[18][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[19][c]));
+        acc = lane_pair_add_product(acc, b[17], lane_pair_load(&f->P[20][c]));
+        acc = lane_pair_add_product(acc, b[18], lane_pair_load(&f->P[21][c]));
+        acc = lane_pair_add_product(acc, b[19], lane_pair_load(&f->P[22][c]));
+        acc = lane_pair_add_product(acc, b[20], lane_pair_load(&f->P[23][c]));
+        acc = lane_pair_add_product(acc, b[21], lane_pair_load(&f->P[24][c]));
+        acc = lane_pair_add_product(acc, b[22], lane_pair_load(&f->P[25][c]));
+        acc = lane_pair_add_product(acc, b[23], lane_pair_load(&f->P[26][c]));
+        acc = lane_pair_add_product(acc, b[24], lane_pair_load(&f->P[27][c]));
+        acc = lane_pair_add_product(acc, b[25], lane_pair_load(&f->P[28][c]));
+        acc = lane_pair_add_product(acc, b[26], lane_pair_load(&f->P[29][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -4954,294 +4833,65 @@ NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_3(const ned_doppler32_augment
         f, const ned_doppler32_augmented_transition *restrict t,
         ned_doppler32_augmented_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[81]*f->P[0][0] + t->Phi[82]*f->P[1][0] + t->Phi[83]*f->P[2][0] +
-            t->Phi[84]*f->P[3][0] + t->Phi[85]*f->P[4][0] + t->Phi[86]*f->P[5][0] +
-            t->Phi[87]*f->P[7][0] + t->Phi[88]*f->P[8][0] + t->Phi[89]*f->P[9][0] +
-            t->Phi[90]*f->P[10][0] + t->Phi[91]*f->P[11][0] + t->Phi[92]*f->P[12][0] +
-            t->Phi[93]*f->P[13][0] + t->Phi[94]*f->P[14][0] + t->Phi[95]*f->P[15][0] +
-            t->Phi[96]*f->P[18][0] + t->Phi[97]*f->P[19][0] + t->Phi[98]*f->P[20][0] +
-            t->Phi[99]*f->P[21][0] + t->Phi[100]*f->P[22][0] + t->Phi[101]*f->P[23][0] +
-            t->Phi[102]*f->P[24][0] + t->Phi[103]*f->P[25][0] + t->Phi[104]*f->P[26][0] +
-            t->Phi[105]*f->P[27][0] + t->Phi[106]*f->P[28][0] + t->Phi[107]*f->P[29][0];
-    w->M[1] = t->Phi[81]*f->P[0][1] + t->Phi[82]*f->P[1][1] + t->Phi[83]*f->P[2][1] +
-            t->Phi[84]*f->P[3][1] + t->Phi[85]*f->P[4][1] + t->Phi[86]*f->P[5][1] +
-            t->Phi[87]*f->P[7][1] + t->Phi[88]*f->P[8][1] + t->Phi[89]*f->P[9][1] +
-            t->Phi[90]*f->P[10][1] + t->Phi[91]*f->P[11][1] + t->Phi[92]*f->P[12][1] +
-            t->Phi[93]*f->P[13][1] + t->Phi[94]*f->P[14][1] + t->Phi[95]*f->P[15][1] +
-            t->Phi[96]*f->P[18][1] + t->Phi[97]*f->P[19][1] + t->Phi[98]*f->P[20][1] +
-            t->Phi[99]*f->P[21][1] + t->Phi[100]*f->P[22][1] + t->Phi[101]*f->P[23][1] +
-            t->Phi[102]*f->P[24][1] + t->Phi[103]*f->P[25][1] + t->Phi[104]*f->P[26][1] +
-            t->Phi[105]*f->P[27][1] + t->Phi[106]*f->P[28][1] + t->Phi[107]*f->P[29][1];
-    w->M[2] = t->Phi[81]*f->P[0][2] + t->Phi[82]*f->P[1][2] + t->Phi[83]*f->P[2][2] +
-            t->Phi[84]*f->P[3][2] + t->Phi[85]*f->P[4][2] + t->Phi[86]*f->P[5][2] +
-            t->Phi[87]*f->P[7][2] + t->Phi[88]*f->P[8][2] + t->Phi[89]*f->P[9][2] +
-            t->Phi[90]*f->P[10][2] + t->Phi[91]*f->P[11][2] + t->Phi[92]*f->P[12][2] +
-            t->Phi[93]*f->P[13][2] + t->Phi[94]*f->P[14][2] + t->Phi[95]*f->P[15][2] +
-            t->Phi[96]*f->P[18][2] + t->Phi[97]*f->P[19][2] + t->Phi[98]*f->P[20][2] +
-            t->Phi[99]*f->P[21][2] + t->Phi[100]*f->P[22][2] + t->Phi[101]*f->P[23][2] +
-            t->Phi[102]*f->P[24][2] + t->Phi[103]*f->P[25][2] + t->Phi[104]*f->P[26][2] +
-            t->Phi[105]*f->P[27][2] + t->Phi[106]*f->P[28][2] + t->Phi[107]*f->P[29][2];
-    w->M[3] = t->Phi[81]*f->P[0][3] + t->Phi[82]*f->P[1][3] + t->Phi[83]*f->P[2][3] +
-            t->Phi[84]*f->P[3][3] + t->Phi[85]*f->P[4][3] + t->Phi[86]*f->P[5][3] +
-            t->Phi[87]*f->P[7][3] + t->Phi[88]*f->P[8][3] + t->Phi[89]*f->P[9][3] +
-            t->Phi[90]*f->P[10][3] + t->Phi[91]*f->P[11][3] + t->Phi[92]*f->P[12][3] +
-            t->Phi[93]*f->P[13][3] + t->Phi[94]*f->P[14][3] + t->Phi[95]*f->P[15][3] +
-            t->Phi[96]*f->P[18][3] + t->Phi[97]*f->P[19][3] + t->Phi[98]*f->P[20][3] +
-            t->Phi[99]*f->P[21][3] + t->Phi[100]*f->P[22][3] + t->Phi[101]*f->P[23][3] +
-            t->Phi[102]*f->P[24][3] + t->Phi[103]*f->P[25][3] + t->Phi[104]*f->P[26][3] +
-            t->Phi[105]*f->P[27][3] + t->Phi[106]*f->P[28][3] + t->Phi[107]*f->P[29][3];
-    w->M[4] = t->Phi[81]*f->P[0][4] + t->Phi[82]*f->P[1][4] + t->Phi[83]*f->P[2][4] +
-            t->Phi[84]*f->P[3][4] + t->Phi[85]*f->P[4][4] + t->Phi[86]*f->P[5][4] +
-            t->Phi[87]*f->P[7][4] + t->Phi[88]*f->P[8][4] + t->Phi[89]*f->P[9][4] +
-            t->Phi[90]*f->P[10][4] + t->Phi[91]*f->P[11][4] + t->Phi[92]*f->P[12][4] +
-            t->Phi[93]*f->P[13][4] + t->Phi[94]*f->P[14][4] + t->Phi[95]*f->P[15][4] +
-            t->Phi[96]*f->P[18][4] + t->Phi[97]*f->P[19][4] + t->Phi[98]*f->P[20][4] +
-            t->Phi[99]*f->P[21][4] + t->Phi[100]*f->P[22][4] + t->Phi[101]*f->P[23][4] +
-            t->Phi[102]*f->P[24][4] + t->Phi[103]*f->P[25][4] + t->Phi[104]*f->P[26][4] +
-            t->Phi[105]*f->P[27][4] + t->Phi[106]*f->P[28][4] + t->Phi[107]*f->P[29][4];
-    w->M[5] = t->Phi[81]*f->P[0][5] + t->Phi[82]*f->P[1][5] + t->Phi[83]*f->P[2][5] +
-            t->Phi[84]*f->P[3][5] + t->Phi[85]*f->P[4][5] + t->Phi[86]*f->P[5][5] +
-            t->Phi[87]*f->P[7][5] + t->Phi[88]*f->P[8][5] + t->Phi[89]*f->P[9][5] +
-            t->Phi[90]*f->P[10][5] + t->Phi[91]*f->P[11][5] + t->Phi[92]*f->P[12][5] +
-            t->Phi[93]*f->P[13][5] + t->Phi[94]*f->P[14][5] + t->Phi[95]*f->P[15][5] +
-            t->Phi[96]*f->P[18][5] + t->Phi[97]*f->P[19][5] + t->Phi[98]*f->P[20][5] +
-            t->Phi[99]*f->P[21][5] + t->Phi[100]*f->P[22][5] + t->Phi[101]*f->P[23][5] +
-            t->Phi[102]*f->P[24][5] + t->Phi[103]*f->P[25][5] + t->Phi[104]*f->P[26][5] +
-            t->Phi[105]*f->P[27][5] + t->Phi[106]*f->P[28][5] + t->Phi[107]*f->P[29][5];
-    w->M[6] = t->Phi[81]*f->P[0][6] + t->Phi[82]*f->P[1][6] + t->Phi[83]*f->P[2][6] +
-            t->Phi[84]*f->P[3][6] + t->Phi[85]*f->P[4][6] + t->Phi[86]*f->P[5][6] +
-            t->Phi[87]*f->P[7][6] + t->Phi[88]*f->P[8][6] + t->Phi[89]*f->P[9][6] +
-            t->Phi[90]*f->P[10][6] + t->Phi[91]*f->P[11][6] + t->Phi[92]*f->P[12][6] +
-            t->Phi[93]*f->P[13][6] + t->Phi[94]*f->P[14][6] + t->Phi[95]*f->P[15][6] +
-            t->Phi[96]*f->P[18][6] + t->Phi[97]*f->P[19][6] + t->Phi[98]*f->P[20][6] +
-            t->Phi[99]*f->P[21][6] + t->Phi[100]*f->P[22][6] + t->Phi[101]*f->P[23][6] +
-            t->Phi[102]*f->P[24][6] + t->Phi[103]*f->P[25][6] + t->Phi[104]*f->P[26][6] +
-            t->Phi[105]*f->P[27][6] + t->Phi[106]*f->P[28][6] + t->Phi[107]*f->P[29][6];
-    w->M[7] = t->Phi[81]*f->P[0][7] + t->Phi[82]*f->P[1][7] + t->Phi[83]*f->P[2][7] +
-            t->Phi[84]*f->P[3][7] + t->Phi[85]*f->P[4][7] + t->Phi[86]*f->P[5][7] +
-            t->Phi[87]*f->P[7][7] + t->Phi[88]*f->P[8][7] + t->Phi[89]*f->P[9][7] +
-            t->Phi[90]*f->P[10][7] + t->Phi[91]*f->P[11][7] + t->Phi[92]*f->P[12][7] +
-            t->Phi[93]*f->P[13][7] + t->Phi[94]*f->P[14][7] + t->Phi[95]*f->P[15][7] +
-            t->Phi[96]*f->P[18][7] + t->Phi[97]*f->P[19][7] + t->Phi[98]*f->P[20][7] +
-            t->Phi[99]*f->P[21][7] + t->Phi[100]*f->P[22][7] + t->Phi[101]*f->P[23][7] +
-            t->Phi[102]*f->P[24][7] + t->Phi[103]*f->P[25][7] + t->Phi[104]*f->P[26][7] +
-            t->Phi[105]*f->P[27][7] + t->Phi[106]*f->P[28][7] + t->Phi[107]*f->P[29][7];
-    w->M[8] = t->Phi[81]*f->P[0][8] + t->Phi[82]*f->P[1][8] + t->Phi[83]*f->P[2][8] +
-            t->Phi[84]*f->P[3][8] + t->Phi[85]*f->P[4][8] + t->Phi[86]*f->P[5][8] +
-            t->Phi[87]*f->P[7][8] + t->Phi[88]*f->P[8][8] + t->Phi[89]*f->P[9][8] +
-            t->Phi[90]*f->P[10][8] + t->Phi[91]*f->P[11][8] + t->Phi[92]*f->P[12][8] +
-            t->Phi[93]*f->P[13][8] + t->Phi[94]*f->P[14][8] + t->Phi[95]*f->P[15][8] +
-            t->Phi[96]*f->P[18][8] + t->Phi[97]*f->P[19][8] + t->Phi[98]*f->P[20][8] +
-            t->Phi[99]*f->P[21][8] + t->Phi[100]*f->P[22][8] + t->Phi[101]*f->P[23][8] +
-            t->Phi[102]*f->P[24][8] + t->Phi[103]*f->P[25][8] + t->Phi[104]*f->P[26][8] +
-            t->Phi[105]*f->P[27][8] + t->Phi[106]*f->P[28][8] + t->Phi[107]*f->P[29][8];
-    w->M[9] = t->Phi[81]*f->P[0][9] + t->Phi[82]*f->P[1][9] + t->Phi[83]*f->P[2][9] +
-            t->Phi[84]*f->P[3][9] + t->Phi[85]*f->P[4][9] + t->Phi[86]*f->P[5][9] +
-            t->Phi[87]*f->P[7][9] + t->Phi[88]*f->P[8][9] + t->Phi[89]*f->P[9][9] +
-            t->Phi[90]*f->P[10][9] + t->Phi[91]*f->P[11][9] + t->Phi[92]*f->P[12][9] +
-            t->Phi[93]*f->P[13][9] + t->Phi[94]*f->P[14][9] + t->Phi[95]*f->P[15][9] +
-            t->Phi[96]*f->P[18][9] + t->Phi[97]*f->P[19][9] + t->Phi[98]*f->P[20][9] +
-            t->Phi[99]*f->P[21][9] + t->Phi[100]*f->P[22][9] + t->Phi[101]*f->P[23][9] +
-            t->Phi[102]*f->P[24][9] + t->Phi[103]*f->P[25][9] + t->Phi[104]*f->P[26][9] +
-            t->Phi[105]*f->P[27][9] + t->Phi[106]*f->P[28][9] + t->Phi[107]*f->P[29][9];
-    w->M[10] = t->Phi[81]*f->P[0][10] + t->Phi[82]*f->P[1][10] + t->Phi[83]*f->P[2][10] +
-            t->Phi[84]*f->P[3][10] + t->Phi[85]*f->P[4][10] + t->Phi[86]*f->P[5][10] +
-            t->Phi[87]*f->P[7][10] + t->Phi[88]*f->P[8][10] + t->Phi[89]*f->P[9][10] +
-            t->Phi[90]*f->P[10][10] + t->Phi[91]*f->P[11][10] + t->Phi[92]*f->P[12][10] +
-            t->Phi[93]*f->P[13][10] + t->Phi[94]*f->P[14][10] + t->Phi[95]*f->P[15][10] +
-            t->Phi[96]*f->P[18][10] + t->Phi[97]*f->P[19][10] + t->Phi[98]*f->P[20][10] +
-            t->Phi[99]*f->P[21][10] + t->Phi[100]*f->P[22][10] + t->Phi[101]*f->P[23][10] +
-            t->Phi[102]*f->P[24][10] + t->Phi[103]*f->P[25][10] + t->Phi[104]*f->P[26][10] +
-            t->Phi[105]*f->P[27][10] + t->Phi[106]*f->P[28][10] + t->Phi[107]*f->P[29][10];
-    w->M[11] = t->Phi[81]*f->P[0][11] + t->Phi[82]*f->P[1][11] + t->Phi[83]*f->P[2][11] +
-            t->Phi[84]*f->P[3][11] + t->Phi[85]*f->P[4][11] + t->Phi[86]*f->P[5][11] +
-            t->Phi[87]*f->P[7][11] + t->Phi[88]*f->P[8][11] + t->Phi[89]*f->P[9][11] +
-            t->Phi[90]*f->P[10][11] + t->Phi[91]*f->P[11][11] + t->Phi[92]*f->P[12][11] +
-            t->Phi[93]*f->P[13][11] + t->Phi[94]*f->P[14][11] + t->Phi[95]*f->P[15][11] +
-            t->Phi[96]*f->P[18][11] + t->Phi[97]*f->P[19][11] + t->Phi[98]*f->P[20][11] +
-            t->Phi[99]*f->P[21][11] + t->Phi[100]*f->P[22][11] + t->Phi[101]*f->P[23][11] +
-            t->Phi[102]*f->P[24][11] + t->Phi[103]*f->P[25][11] + t->Phi[104]*f->P[26][11] +
-            t->Phi[105]*f->P[27][11] + t->Phi[106]*f->P[28][11] + t->Phi[107]*f->P[29][11];
-    w->M[12] = t->Phi[81]*f->P[0][12] + t->Phi[82]*f->P[1][12] + t->Phi[83]*f->P[2][12] +
-            t->Phi[84]*f->P[3][12] + t->Phi[85]*f->P[4][12] + t->Phi[86]*f->P[5][12] +
-            t->Phi[87]*f->P[7][12] + t->Phi[88]*f->P[8][12] + t->Phi[89]*f->P[9][12] +
-            t->Phi[90]*f->P[10][12] + t->Phi[91]*f->P[11][12] + t->Phi[92]*f->P[12][12] +
-            t->Phi[93]*f->P[13][12] + t->Phi[94]*f->P[14][12] + t->Phi[95]*f->P[15][12] +
-            t->Phi[96]*f->P[18][12] + t->Phi[97]*f->P[19][12] + t->Phi[98]*f->P[20][12] +
-            t->Phi[99]*f->P[21][12] + t->Phi[100]*f->P[22][12] + t->Phi[101]*f->P[23][12] +
-            t->Phi[102]*f->P[24][12] + t->Phi[103]*f->P[25][12] + t->Phi[104]*f->P[26][12] +
-            t->Phi[105]*f->P[27][12] + t->Phi[106]*f->P[28][12] + t->Phi[107]*f->P[29][12];
-    w->M[13] = t->Phi[81]*f->P[0][13] + t->Phi[82]*f->P[1][13] + t->Phi[83]*f->P[2][13] +
-            t->Phi[84]*f->P[3][13] + t->Phi[85]*f->P[4][13] + t->Phi[86]*f->P[5][13] +
-            t->Phi[87]*f->P[7][13] + t->Phi[88]*f->P[8][13] + t->Phi[89]*f->P[9][13] +
-            t->Phi[90]*f->P[10][13] + t->Phi[91]*f->P[11][13] + t->Phi[92]*f->P[12][13] +
-            t->Phi[93]*f->P[13][13] + t->Phi[94]*f->P[14][13] + t->Phi[95]*f->P[15][13] +
-            t->Phi[96]*f->P[18][13] + t->Phi[97]*f->P[19][13] + t->Phi[98]*f->P[20][13] +
-            t->Phi[99]*f->P[21][13] + t->Phi[100]*f->P[22][13] + t->Phi[101]*f->P[23][13] +
-            t->Phi[102]*f->P[24][13] + t->Phi[103]*f->P[25][13] + t->Phi[104]*f->P[26][13] +
-            t->Phi[105]*f->P[27][13] + t->Phi[106]*f->P[28][13] + t->Phi[107]*f->P[29][13];
-    w->M[14] = t->Phi[81]*f->P[0][14] + t->Phi[82]*f->P[1][14] + t->Phi[83]*f->P[2][14] +
-            t->Phi[84]*f->P[3][14] + t->Phi[85]*f->P[4][14] + t->Phi[86]*f->P[5][14] +
-            t->Phi[87]*f->P[7][14] + t->Phi[88]*f->P[8][14] + t->Phi[89]*f->P[9][14] +
-            t->Phi[90]*f->P[10][14] + t->Phi[91]*f->P[11][14] + t->Phi[92]*f->P[12][14] +
-            t->Phi[93]*f->P[13][14] + t->Phi[94]*f->P[14][14] + t->Phi[95]*f->P[15][14] +
-            t->Phi[96]*f->P[18][14] + t->Phi[97]*f->P[19][14] + t->Phi[98]*f->P[20][14] +
-            t->Phi[99]*f->P[21][14] + t->Phi[100]*f->P[22][14] + t->Phi[101]*f->P[23][14] +
-            t->Phi[102]*f->P[24][14] + t->Phi[103]*f->P[25][14] + t->Phi[104]*f->P[26][14] +
-            t->Phi[105]*f->P[27][14] + t->Phi[106]*f->P[28][14] + t->Phi[107]*f->P[29][14];
-    w->M[15] = t->Phi[81]*f->P[0][15] + t->Phi[82]*f->P[1][15] + t->Phi[83]*f->P[2][15] +
-            t->Phi[84]*f->P[3][15] + t->Phi[85]*f->P[4][15] + t->Phi[86]*f->P[5][15] +
-            t->Phi[87]*f->P[7][15] + t->Phi[88]*f->P[8][15] + t->Phi[89]*f->P[9][15] +
-            t->Phi[90]*f->P[10][15] + t->Phi[91]*f->P[11][15] + t->Phi[92]*f->P[12][15] +
-            t->Phi[93]*f->P[13][15] + t->Phi[94]*f->P[14][15] + t->Phi[95]*f->P[15][15] +
-            t->Phi[96]*f->P[18][15] + t->Phi[97]*f->P[19][15] + t->Phi[98]*f->P[20][15] +
-            t->Phi[99]*f->P[21][15] + t->Phi[100]*f->P[22][15] + t->Phi[101]*f->P[23][15] +
-            t->Phi[102]*f->P[24][15] + t->Phi[103]*f->P[25][15] + t->Phi[104]*f->P[26][15] +
-            t->Phi[105]*f->P[27][15] + t->Phi[106]*f->P[28][15] + t->Phi[107]*f->P[29][15];
-    w->M[16] = t->Phi[81]*f->P[0][16] + t->Phi[82]*f->P[1][16] + t->Phi[83]*f->P[2][16] +
-            t->Phi[84]*f->P[3][16] + t->Phi[85]*f->P[4][16] + t->Phi[86]*f->P[5][16] +
-            t->Phi[87]*f->P[7][16] + t->Phi[88]*f->P[8][16] + t->Phi[89]*f->P[9][16] +
-            t->Phi[90]*f->P[10][16] + t->Phi[91]*f->P[11][16] + t->Phi[92]*f->P[12][16] +
-            t->Phi[93]*f->P[13][16] + t->Phi[94]*f->P[14][16] + t->Phi[95]*f->P[15][16] +
-            t->Phi[96]*f->P[18][16] + t->Phi[97]*f->P[19][16] + t->Phi[98]*f->P[20][16] +
-            t->Phi[99]*f->P[21][16] + t->Phi[100]*f->P[22][16] + t->Phi[101]*f->P[23][16] +
-            t->Phi[102]*f->P[24][16] + t->Phi[103]*f->P[25][16] + t->Phi[104]*f->P[26][16] +
-            t->Phi[105]*f->P[27][16] + t->Phi[106]*f->P[28][16] + t->Phi[107]*f->P[29][16];
-    w->M[17] = t->Phi[81]*f->P[0][17] + t->Phi[82]*f->P[1][17] + t->Phi[83]*f->P[2][17] +
-            t->Phi[84]*f->P[3][17] + t->Phi[85]*f->P[4][17] + t->Phi[86]*f->P[5][17] +
-            t->Phi[87]*f->P[7][17] + t->Phi[88]*f->P[8][17] + t->Phi[89]*f->P[9][17] +
-            t->Phi[90]*f->P[10][17] + t->Phi[91]*f->P[11][17] + t->Phi[92]*f->P[12][17] +
-            t->Phi[93]*f->P[13][17] + t->Phi[94]*f->P[14][17] + t->Phi[95]*f->P[15][17] +
-            t->Phi[96]*f->P[18][17] + t->Phi[97]*f->P[19][17] + t->Phi[98]*f->P[20][17] +
-            t->Phi[99]*f->P[21][17] + t->Phi[100]*f->P[22][17] + t->Phi[101]*f->P[23][17] +
-            t->Phi[102]*f->P[24][17] + t->Phi[103]*f->P[25][17] + t->Phi[104]*f->P[26][17] +
-            t->Phi[105]*f->P[27][17] + t->Phi[106]*f->P[28][17] + t->Phi[107]*f->P[29][17];
-    w->M[18] = t->Phi[81]*f->P[0][18] + t->Phi[82]*f->P[1][18] + t->Phi[83]*f->P[2][18] +
-            t->Phi[84]*f->P[3][18] + t->Phi[85]*f->P[4][18] + t->Phi[86]*f->P[5][18] +
-            t->Phi[87]*f->P[7][18] + t->Phi[88]*f->P[8][18] + t->Phi[89]*f->P[9][18] +
-            t->Phi[90]*f->P[10][18] + t->Phi[91]*f->P[11][18] + t->Phi[92]*f->P[12][18] +
-            t->Phi[93]*f->P[13][18] + t->Phi[94]*f->P[14][18] + t->Phi[95]*f->P[15][18] +
-            t->Phi[96]*f->P[18][18] + t->Phi[97]*f->P[19][18] + t->Phi[98]*f->P[20][18] +
-            t->Phi[99]*f->P[21][18] + t->Phi[100]*f->P[22][18] + t->Phi[101]*f->P[23][18] +
-            t->Phi[102]*f->P[24][18] + t->Phi[103]*f->P[25][18] + t->Phi[104]*f->P[26][18] +
-            t->Phi[105]*f->P[27][18] + t->Phi[106]*f->P[28][18] + t->Phi[107]*f->P[29][18];
-    w->M[19] = t->Phi[81]*f->P[0][19] + t->Phi[82]*f->P[1][19] + t->Phi[83]*f->P[2][19] +
-            t->Phi[84]*f->P[3][19] + t->Phi[85]*f->P[4][19] + t->Phi[86]*f->P[5][19] +
-            t->Phi[87]*f->P[7][19] + t->Phi[88]*f->P[8][19] + t->Phi[89]*f->P[9][19] +
-            t->Phi[90]*f->P[10][19] + t->Phi[91]*f->P[11][19] + t->Phi[92]*f->P[12][19] +
-            t->Phi[93]*f->P[13][19] + t->Phi[94]*f->P[14][19] + t->Phi[95]*f->P[15][19] +
-            t->Phi[96]*f->P[18][19] + t->Phi[97]*f->P[19][19] + t->Phi[98]*f->P[20][19] +
-            t->Phi[99]*f->P[21][19] + t->Phi[100]*f->P[22][19] + t->Phi[101]*f->P[23][19] +
-            t->Phi[102]*f->P[24][19] + t->Phi[103]*f->P[25][19] + t->Phi[104]*f->P[26][19] +
-            t->Phi[105]*f->P[27][19] + t->Phi[106]*f->P[28][19] + t->Phi[107]*f->P[29][19];
-    w->M[20] = t->Phi[81]*f->P[0][20] + t->Phi[82]*f->P[1][20] + t->Phi[83]*f->P[2][20] +
-            t->Phi[84]*f->P[3][20] + t->Phi[85]*f->P[4][20] + t->Phi[86]*f->P[5][20] +
-            t->Phi[87]*f->P[7][20] + t->Phi[88]*f->P[8][20] + t->Phi[89]*f->P[9][20] +
-            t->Phi[90]*f->P[10][20] + t->Phi[91]*f->P[11][20] + t->Phi[92]*f->P[12][20] +
-            t->Phi[93]*f->P[13][20] + t->Phi[94]*f->P[14][20] + t->Phi[95]*f->P[15][20] +
-            t->Phi[96]*f->P[18][20] + t->Phi[97]*f->P[19][20] + t->Phi[98]*f->P[20][20] +
-            t->Phi[99]*f->P[21][20] + t->Phi[100]*f->P[22][20] + t->Phi[101]*f->P[23][20] +
-            t->Phi[102]*f->P[24][20] + t->Phi[103]*f->P[25][20] + t->Phi[104]*f->P[26][20] +
-            t->Phi[105]*f->P[27][20] + t->Phi[106]*f->P[28][20] + t->Phi[107]*f->P[29][20];
-    w->M[21] = t->Phi[81]*f->P[0][21] + t->Phi[82]*f->P[1][21] + t->Phi[83]*f->P[2][21] +
-            t->Phi[84]*f->P[3][21] + t->Phi[85]*f->P[4][21] + t->Phi[86]*f->P[5][21] +
-            t->Phi[87]*f->P[7][21] + t->Phi[88]*f->P[8][21] + t->Phi[89]*f->P[9][21] +
-            t->Phi[90]*f->P[10][21] + t->Phi[91]*f->P[11][21] + t->Phi[92]*f->P[12][21] +
-            t->Phi[93]*f->P[13][21] + t->Phi[94]*f->P[14][21] + t->Phi[95]*f->P[15][21] +
-            t->Phi[96]*f->P[18][21] + t->Phi[97]*f->P[19][21] + t->Phi[98]*f->P[20][21] +
-            t->Phi[99]*f->P[21][21] + t->Phi[100]*f->P[22][21] + t->Phi[101]*f->P[23][21] +
-            t->Phi[102]*f->P[24][21] + t->Phi[103]*f->P[25][21] + t->Phi[104]*f->P[26][21] +
-            t->Phi[105]*f->P[27][21] + t->Phi[106]*f->P[28][21] + t->Phi[107]*f->P[29][21];
-    w->M[22] = t->Phi[81]*f->P[0][22] + t->Phi[82]*f->P[1][22] + t->Phi[83]*f->P[2][22] +
-            t->Phi[84]*f->P[3][22] + t->Phi[85]*f->P[4][22] + t->Phi[86]*f->P[5][22] +
-            t->Phi[87]*f->P[7][22] + t->Phi[88]*f->P[8][22] + t->Phi[89]*f->P[9][22] +
-            t->Phi[90]*f->P[10][22] + t->Phi[91]*f->P[11][22] + t->Phi[92]*f->P[12][22] +
-            t->Phi[93]*f->P[13][22] + t->Phi[94]*f->P[14][22] + t->Phi[95]*f->P[15][22] +
-            t->Phi[96]*f->P[18][22] + t->Phi[97]*f->P[19][22] + t->Phi[98]*f->P[20][22] +
-            t->Phi[99]*f->P[21][22] + t->Phi[100]*f->P[22][22] + t->Phi[101]*f->P[23][22] +
-            t->Phi[102]*f->P[24][22] + t->Phi[103]*f->P[25][22] + t->Phi[104]*f->P[26][22] +
-            t->Phi[105]*f->P[27][22] + t->Phi[106]*f->P[28][22] + t->Phi[107]*f->P[29][22];
-    w->M[23] = t->Phi[81]*f->P[0][23] + t->Phi[82]*f->P[1][23] + t->Phi[83]*f->P[2][23] +
-            t->Phi[84]*f->P[3][23] + t->Phi[85]*f->P[4][23] + t->Phi[86]*f->P[5][23] +
-            t->Phi[87]*f->P[7][23] + t->Phi[88]*f->P[8][23] + t->Phi[89]*f->P[9][23] +
-            t->Phi[90]*f->P[10][23] + t->Phi[91]*f->P[11][23] + t->Phi[92]*f->P[12][23] +
-            t->Phi[93]*f->P[13][23] + t->Phi[94]*f->P[14][23] + t->Phi[95]*f->P[15][23] +
-            t->Phi[96]*f->P[18][23] + t->Phi[97]*f->P[19][23] + t->Phi[98]*f->P[20][23] +
-            t->Phi[99]*f->P[21][23] + t->Phi[100]*f->P[22][23] + t->Phi[101]*f->P[23][23] +
-            t->Phi[102]*f->P[24][23] + t->Phi[103]*f->P[25][23] + t->Phi[104]*f->P[26][23] +
-            t->Phi[105]*f->P[27][23] + t->Phi[106]*f->P[28][23] + t->Phi[107]*f->P[29][23];
-    w->M[24] = t->Phi[81]*f->P[0][24] + t->Phi[82]*f->P[1][24] + t->Phi[83]*f->P[2][24] +
-            t->Phi[84]*f->P[3][24] + t->Phi[85]*f->P[4][24] + t->Phi[86]*f->P[5][24] +
-            t->Phi[87]*f->P[7][24] + t->Phi[88]*f->P[8][24] + t->Phi[89]*f->P[9][24] +
-            t->Phi[90]*f->P[10][24] + t->Phi[91]*f->P[11][24] + t->Phi[92]*f->P[12][24] +
-            t->Phi[93]*f->P[13][24] + t->Phi[94]*f->P[14][24] + t->Phi[95]*f->P[15][24] +
-            t->Phi[96]*f->P[18][24] + t->Phi[97]*f->P[19][24] + t->Phi[98]*f->P[20][24] +
-            t->Phi[99]*f->P[21][24] + t->Phi[100]*f->P[22][24] + t->Phi[101]*f->P[23][24] +
-            t->Phi[102]*f->P[24][24] + t->Phi[103]*f->P[25][24] + t->Phi[104]*f->P[26][24] +
-            t->Phi[105]*f->P[27][24] + t->Phi[106]*f->P[28][24] + t->Phi[107]*f->P[29][24];
-    w->M[25] = t->Phi[81]*f->P[0][25] + t->Phi[82]*f->P[1][25] + t->Phi[83]*f->P[2][25] +
-            t->Phi[84]*f->P[3][25] + t->Phi[85]*f->P[4][25] + t->Phi[86]*f->P[5][25] +
-            t->Phi[87]*f->P[7][25] + t->Phi[88]*f->P[8][25] + t->Phi[89]*f->P[9][25] +
-            t->Phi[90]*f->P[10][25] + t->Phi[91]*f->P[11][25] + t->Phi[92]*f->P[12][25] +
-            t->Phi[93]*f->P[13][25] + t->Phi[94]*f->P[14][25] + t->Phi[95]*f->P[15][25] +
-            t->Phi[96]*f->P[18][25] + t->Phi[97]*f->P[19][25] + t->Phi[98]*f->P[20][25] +
-            t->Phi[99]*f->P[21][25] + t->Phi[100]*f->P[22][25] + t->Phi[101]*f->P[23][25] +
-            t->Phi[102]*f->P[24][25] + t->Phi[103]*f->P[25][25] + t->Phi[104]*f->P[26][25] +
-            t->Phi[105]*f->P[27][25] + t->Phi[106]*f->P[28][25] + t->Phi[107]*f->P[29][25];
-    w->M[26] = t->Phi[81]*f->P[0][26] + t->Phi[82]*f->P[1][26] + t->Phi[83]*f->P[2][26] +
-            t->Phi[84]*f->P[3][26] + t->Phi[85]*f->P[4][26] + t->Phi[86]*f->P[5][26] +
-            t->Phi[87]*f->P[7][26] + t->Phi[88]*f->P[8][26] + t->Phi[89]*f->P[9][26] +
-            t->Phi[90]*f->P[10][26] + t->Phi[91]*f->P[11][26] + t->Phi[92]*f->P[12][26] +
-            t->Phi[93]*f->P[13][26] + t->Phi[94]*f->P[14][26] + t->Phi[95]*f->P[15][26] +
-            t->Phi[96]*f->P[18][26] + t->Phi[97]*f->P[19][26] + t->Phi[98]*f->P[20][26] +
-            t->Phi[99]*f->P[21][26] + t->Phi[100]*f->P[22][26] + t->Phi[101]*f->P[23][26] +
-            t->Phi[102]*f->P[24][26] + t->Phi[103]*f->P[25][26] + t->Phi[104]*f->P[26][26] +
-            t->Phi[105]*f->P[27][26] + t->Phi[106]*f->P[28][26] + t->Phi[107]*f->P[29][26];
-    w->M[27] = t->Phi[81]*f->P[0][27] + t->Phi[82]*f->P[1][27] + t->Phi[83]*f->P[2][27] +
-            t->Phi[84]*f->P[3][27] + t->Phi[85]*f->P[4][27] + t->Phi[86]*f->P[5][27] +
-            t->Phi[87]*f->P[7][27] + t->Phi[88]*f->P[8][27] + t->Phi[89]*f->P[9][27] +
-            t->Phi[90]*f->P[10][27] + t->Phi[91]*f->P[11][27] + t->Phi[92]*f->P[12][27] +
-            t->Phi[93]*f->P[13][27] + t->Phi[94]*f->P[14][27] + t->Phi[95]*f->P[15][27] +
-            t->Phi[96]*f->P[18][27] + t->Phi[97]*f->P[19][27] + t->Phi[98]*f->P[20][27] +
-            t->Phi[99]*f->P[21][27] + t->Phi[100]*f->P[22][27] + t->Phi[101]*f->P[23][27] +
-            t->Phi[102]*f->P[24][27] + t->Phi[103]*f->P[25][27] + t->Phi[104]*f->P[26][27] +
-            t->Phi[105]*f->P[27][27] + t->Phi[106]*f->P[28][27] + t->Phi[107]*f->P[29][27];
-    w->M[28] = t->Phi[81]*f->P[0][28] + t->Phi[82]*f->P[1][28] + t->Phi[83]*f->P[2][28] +
-            t->Phi[84]*f->P[3][28] + t->Phi[85]*f->P[4][28] + t->Phi[86]*f->P[5][28] +
-            t->Phi[87]*f->P[7][28] + t->Phi[88]*f->P[8][28] + t->Phi[89]*f->P[9][28] +
-            t->Phi[90]*f->P[10][28] + t->Phi[91]*f->P[11][28] + t->Phi[92]*f->P[12][28] +
-            t->Phi[93]*f->P[13][28] + t->Phi[94]*f->P[14][28] + t->Phi[95]*f->P[15][28] +
-            t->Phi[96]*f->P[18][28] + t->Phi[97]*f->P[19][28] + t->Phi[98]*f->P[20][28] +
-            t->Phi[99]*f->P[21][28] + t->Phi[100]*f->P[22][28] + t->Phi[101]*f->P[23][28] +
-            t->Phi[102]*f->P[24][28] + t->Phi[103]*f->P[25][28] + t->Phi[104]*f->P[26][28] +
-            t->Phi[105]*f->P[27][28] + t->Phi[106]*f->P[28][28] + t->Phi[107]*f->P[29][28];
-    w->M[29] = t->Phi[81]*f->P[0][29] + t->Phi[82]*f->P[1][29] + t->Phi[83]*f->P[2][29] +
-            t->Phi[84]*f->P[3][29] + t->Phi[85]*f->P[4][29] + t->Phi[86]*f->P[5][29] +
-            t->Phi[87]*f->P[7][29] + t->Phi[88]*f->P[8][29] + t->Phi[89]*f->P[9][29] +
-            t->Phi[90]*f->P[10][29] + t->Phi[91]*f->P[11][29] + t->Phi[92]*f->P[12][29] +
-            t->Phi[93]*f->P[13][29] + t->Phi[94]*f->P[14][29] + t->Phi[95]*f->P[15][29] +
-            t->Phi[96]*f->P[18][29] + t->Phi[97]*f->P[19][29] + t->Phi[98]*f->P[20][29] +
-            t->Phi[99]*f->P[21][29] + t->Phi[100]*f->P[22][29] + t->Phi[101]*f->P[23][29] +
-            t->Phi[102]*f->P[24][29] + t->Phi[103]*f->P[25][29] + t->Phi[104]*f->P[26][29] +
-            t->Phi[105]*f->P[27][29] + t->Phi[106]*f->P[28][29] + t->Phi[107]*f->P[29][29];
-    w->M[30] = t->Phi[81]*f->P[0][30] + t->Phi[82]*f->P[1][30] + t->Phi[83]*f->P[2][30] +
-            t->Phi[84]*f->P[3][30] + t->Phi[85]*f->P[4][30] + t->Phi[86]*f->P[5][30] +
-            t->Phi[87]*f->P[7][30] + t->Phi[88]*f->P[8][30] + t->Phi[89]*f->P[9][30] +
-            t->Phi[90]*f->P[10][30] + t->Phi[91]*f->P[11][30] + t->Phi[92]*f->P[12][30] +
-            t->Phi[93]*f->P[13][30] + t->Phi[94]*f->P[14][30] + t->Phi[95]*f->P[15][30] +
-            t->Phi[96]*f->P[18][30] + t->Phi[97]*f->P[19][30] + t->Phi[98]*f->P[20][30] +
-            t->Phi[99]*f->P[21][30] + t->Phi[100]*f->P[22][30] + t->Phi[101]*f->P[23][30] +
-            t->Phi[102]*f->P[24][30] + t->Phi[103]*f->P[25][30] + t->Phi[104]*f->P[26][30] +
-            t->Phi[105]*f->P[27][30] + t->Phi[106]*f->P[28][30] + t->Phi[107]*f->P[29][30];
-    w->M[31] = t->Phi[81]*f->P[0][31] + t->Phi[82]*f->P[1][31] + t->Phi[83]*f->P[2][31] +
-            t->Phi[84]*f->P[3][31] + t->Phi[85]*f->P[4][31] + t->Phi[86]*f->P[5][31] +
-            t->Phi[87]*f->P[7][31] + t->Phi[88]*f->P[8][31] + t->Phi[89]*f->P[9][31] +
-            t->Phi[90]*f->P[10][31] + t->Phi[91]*f->P[11][31] + t->Phi[92]*f->P[12][31] +
-            t->Phi[93]*f->P[13][31] + t->Phi[94]*f->P[14][31] + t->Phi[95]*f->P[15][31] +
-            t->Phi[96]*f->P[18][31] + t->Phi[97]*f->P[19][31] + t->Phi[98]*f->P[20][31] +
-            t->Phi[99]*f->P[21][31] + t->Phi[100]*f->P[22][31] + t->Phi[101]*f->P[23][31] +
-            t->Phi[102]*f->P[24][31] + t->Phi[103]*f->P[25][31] + t->Phi[104]*f->P[26][31] +
-            t->Phi[105]*f->P[27][31] + t->Phi[106]*f->P[28][31] + t->Phi[107]*f->P[29][31];
+    int c;
+    lane_pair b[27];
+    b[0] = lane_pair_of(t->Phi[81], t->Phi[81]);
+    b[1] = lane_pair_of(t->Phi[82], t->Phi[82]);
+    b[2] = lane_pair_of(t->Phi[83], t->Phi[83]);
+    b[3] = lane_pair_of(t->Phi[84], t->Phi[84]);
+    b[4] = lane_pair_of(t->Phi[85], t->Phi[85]);
+    b[5] = lane_pair_of(t->Phi[86], t->Phi[86]);
+    b[6] = lane_pair_of(t->Phi[87], t->Phi[87]);
+    b[7] = lane_pair_of(t->Phi[88], t->Phi[88]);
+    b[8] = lane_pair_of(t->Phi[89], t->Phi[89]);
+    b[9] = lane_pair_of(t->Phi[90], t->Phi[90]);
+    b[10] = lane_pair_of(t->Phi[91], t->Phi[91]);
+    b[11] = lane_pair_of(t->Phi[92], t->Phi[92]);
+    b[12] = lane_pair_of(t->Phi[93], t->Phi[93]);
+    b[13] = lane_pair_of(t->Phi[94], t->Phi[94]);
+    b[14] = lane_pair_of(t->Phi[95], t->Phi[95]);
+    b[15] = lane_pair_of(t->Phi[96], t->Phi[96]);
+    b[16] = lane_pair_of(t->Phi[97], t->Phi[97]);
+    b[17] = lane_pair_of(t->Phi[98], t->Phi[98]);
+    b[18] = lane_pair_of(t->Phi[99], t->Phi[99]);
+    b[19] = lane_pair_of(t->Phi[100], t->Phi[100]);
+    b[20] = lane_pair_of(t->Phi[101], t->Phi[101]);
+    b[21] = lane_pair_of(t->Phi[102], t->Phi[102]);
+    b[22] = lane_pair_of(t->Phi[103], t->Phi[103]);
+    b[23] = lane_pair_of(t->Phi[104], t->Phi[104]);
+    b[24] = lane_pair_of(t->Phi[105], t->Phi[105]);
+    b[25] = lane_pair_of(t->Phi[106], t->Phi[106]);
+    b[26] = lane_pair_of(t->Phi[107], t->Phi[107]);
+    for (c = 0; c + 1 < 32; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[18][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[19][c]));
+        acc = lane_pair_add_product(acc, b[17], lane_pair_load(&f->P[20][c]));
+        acc = lane_pair_add_product(acc, b[18], lane_pair_load(&f->P[21][c]));
+        acc = lane_pair_add_product(acc, b[19], lane_pair_load(&f->P[22][c]));
+        acc = lane_pair_add_product(acc, b[20], lane_pair_load(&f->P[23][c]));
+        acc = lane_pair_add_product(acc, b[21], lane_pair_load(&f->P[24][c]));
+        acc = lane_pair_add_product(acc, b[22], lane_pair_load(&f->P[25][c]));
+        acc = lane_pair_add_product(acc, b[23], lane_pair_load(&f->P[26][c]));
+        acc = lane_pair_add_product(acc, b[24], lane_pair_load(&f->P[27][c]));
+        acc = lane_pair_add_product(acc, b[25], lane_pair_load(&f->P[28][c]));
+        acc = lane_pair_add_product(acc, b[26], lane_pair_load(&f->P[29][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -5343,294 +4993,65 @@ NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_4(const ned_doppler32_augment
         f, const ned_doppler32_augmented_transition *restrict t,
         ned_doppler32_augmented_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[108]*f->P[0][0] + t->Phi[109]*f->P[1][0] + t->Phi[110]*f->P[2][0] +
-            t->Phi[111]*f->P[3][0] + t->Phi[112]*f->P[4][0] + t->Phi[113]*f->P[5][0] +
-            t->Phi[114]*f->P[7][0] + t->Phi[115]*f->P[8][0] + t->Phi[116]*f->P[9][0] +
-            t->Phi[117]*f->P[10][0] + t->Phi[118]*f->P[11][0] + t->Phi[119]*f->P[12][0] +
-            t->Phi[120]*f->P[13][0] + t->Phi[121]*f->P[14][0] + t->Phi[122]*f->P[15][0] +
-            t->Phi[123]*f->P[18][0] + t->Phi[124]*f->P[19][0] + t->Phi[125]*f->P[20][0] +
-            t->Phi[126]*f->P[21][0] + t->Phi[127]*f->P[22][0] + t->Phi[128]*f->P[23][0] +
-            t->Phi[129]*f->P[24][0] + t->Phi[130]*f->P[25][0] + t->Phi[131]*f->P[26][0] +
-            t->Phi[132]*f->P[27][0] + t->Phi[133]*f->P[28][0] + t->Phi[134]*f->P[29][0];
-    w->M[1] = t->Phi[108]*f->P[0][1] + t->Phi[109]*f->P[1][1] + t->Phi[110]*f->P[2][1] +
-            t->Phi[111]*f->P[3][1] + t->Phi[112]*f->P[4][1] + t->Phi[113]*f->P[5][1] +
-            t->Phi[114]*f->P[7][1] + t->Phi[115]*f->P[8][1] + t->Phi[116]*f->P[9][1] +
-            t->Phi[117]*f->P[10][1] + t->Phi[118]*f->P[11][1] + t->Phi[119]*f->P[12][1] +
-            t->Phi[120]*f->P[13][1] + t->Phi[121]*f->P[14][1] + t->Phi[122]*f->P[15][1] +
-            t->Phi[123]*f->P[18][1] + t->Phi[124]*f->P[19][1] + t->Phi[125]*f->P[20][1] +
-            t->Phi[126]*f->P[21][1] + t->Phi[127]*f->P[22][1] + t->Phi[128]*f->P[23][1] +
-            t->Phi[129]*f->P[24][1] + t->Phi[130]*f->P[25][1] + t->Phi[131]*f->P[26][1] +
-            t->Phi[132]*f->P[27][1] + t->Phi[133]*f->P[28][1] + t->Phi[134]*f->P[29][1];
-    w->M[2] = t->Phi[108]*f->P[0][2] + t->Phi[109]*f->P[1][2] + t->Phi[110]*f->P[2][2] +
-            t->Phi[111]*f->P[3][2] + t->Phi[112]*f->P[4][2] + t->Phi[113]*f->P[5][2] +
-            t->Phi[114]*f->P[7][2] + t->Phi[115]*f->P[8][2] + t->Phi[116]*f->P[9][2] +
-            t->Phi[117]*f->P[10][2] + t->Phi[118]*f->P[11][2] + t->Phi[119]*f->P[12][2] +
-            t->Phi[120]*f->P[13][2] + t->Phi[121]*f->P[14][2] + t->Phi[122]*f->P[15][2] +
-            t->Phi[123]*f->P[18][2] + t->Phi[124]*f->P[19][2] + t->Phi[125]*f->P[20][2] +
-            t->Phi[126]*f->P[21][2] + t->Phi[127]*f->P[22][2] + t->Phi[128]*f->P[23][2] +
-            t->Phi[129]*f->P[24][2] + t->Phi[130]*f->P[25][2] + t->Phi[131]*f->P[26][2] +
-            t->Phi[132]*f->P[27][2] + t->Phi[133]*f->P[28][2] + t->Phi[134]*f->P[29][2];
-    w->M[3] = t->Phi[108]*f->P[0][3] + t->Phi[109]*f->P[1][3] + t->Phi[110]*f->P[2][3] +
-            t->Phi[111]*f->P[3][3] + t->Phi[112]*f->P[4][3] + t->Phi[113]*f->P[5][3] +
-            t->Phi[114]*f->P[7][3] + t->Phi[115]*f->P[8][3] + t->Phi[116]*f->P[9][3] +
-            t->Phi[117]*f->P[10][3] + t->Phi[118]*f->P[11][3] + t->Phi[119]*f->P[12][3] +
-            t->Phi[120]*f->P[13][3] + t->Phi[121]*f->P[14][3] + t->Phi[122]*f->P[15][3] +
-            t->Phi[123]*f->P[18][3] + t->Phi[124]*f->P[19][3] + t->Phi[125]*f->P[20][3] +
-            t->Phi[126]*f->P[21][3] + t->Phi[127]*f->P[22][3] + t->Phi[128]*f->P[23][3] +
-            t->Phi[129]*f->P[24][3] + t->Phi[130]*f->P[25][3] + t->Phi[131]*f->P[26][3] +
-            t->Phi[132]*f->P[27][3] + t->Phi[133]*f->P[28][3] + t->Phi[134]*f->P[29][3];
-    w->M[4] = t->Phi[108]*f->P[0][4] + t->Phi[109]*f->P[1][4] + t->Phi[110]*f->P[2][4] +
-            t->Phi[111]*f->P[3][4] + t->Phi[112]*f->P[4][4] + t->Phi[113]*f->P[5][4] +
-            t->Phi[114]*f->P[7][4] + t->Phi[115]*f->P[8][4] + t->Phi[116]*f->P[9][4] +
-            t->Phi[117]*f->P[10][4] + t->Phi[118]*f->P[11][4] + t->Phi[119]*f->P[12][4] +
-            t->Phi[120]*f->P[13][4] + t->Phi[121]*f->P[14][4] + t->Phi[122]*f->P[15][4] +
-            t->Phi[123]*f->P[18][4] + t->Phi[124]*f->P[19][4] + t->Phi[125]*f->P[20][4] +
-            t->Phi[126]*f->P[21][4] + t->Phi[127]*f->P[22][4] + t->Phi[128]*f->P[23][4] +
-            t->Phi[129]*f->P[24][4] + t->Phi[130]*f->P[25][4] + t->Phi[131]*f->P[26][4] +
-            t->Phi[132]*f->P[27][4] + t->Phi[133]*f->P[28][4] + t->Phi[134]*f->P[29][4];
-    w->M[5] = t->Phi[108]*f->P[0][5] + t->Phi[109]*f->P[1][5] + t->Phi[110]*f->P[2][5] +
-            t->Phi[111]*f->P[3][5] + t->Phi[112]*f->P[4][5] + t->Phi[113]*f->P[5][5] +
-            t->Phi[114]*f->P[7][5] + t->Phi[115]*f->P[8][5] + t->Phi[116]*f->P[9][5] +
-            t->Phi[117]*f->P[10][5] + t->Phi[118]*f->P[11][5] + t->Phi[119]*f->P[12][5] +
-            t->Phi[120]*f->P[13][5] + t->Phi[121]*f->P[14][5] + t->Phi[122]*f->P[15][5] +
-            t->Phi[123]*f->P[18][5] + t->Phi[124]*f->P[19][5] + t->Phi[125]*f->P[20][5] +
-            t->Phi[126]*f->P[21][5] + t->Phi[127]*f->P[22][5] + t->Phi[128]*f->P[23][5] +
-            t->Phi[129]*f->P[24][5] + t->Phi[130]*f->P[25][5] + t->Phi[131]*f->P[26][5] +
-            t->Phi[132]*f->P[27][5] + t->Phi[133]*f->P[28][5] + t->Phi[134]*f->P[29][5];
-    w->M[6] = t->Phi[108]*f->P[0][6] + t->Phi[109]*f->P[1][6] + t->Phi[110]*f->P[2][6] +
-            t->Phi[111]*f->P[3][6] + t->Phi[112]*f->P[4][6] + t->Phi[113]*f->P[5][6] +
-            t->Phi[114]*f->P[7][6] + t->Phi[115]*f->P[8][6] + t->Phi[116]*f->P[9][6] +
-            t->Phi[117]*f->P[10][6] + t->Phi[118]*f->P[11][6] + t->Phi[119]*f->P[12][6] +
-            t->Phi[120]*f->P[13][6] + t->Phi[121]*f->P[14][6] + t->Phi[122]*f->P[15][6] +
-            t->Phi[123]*f->P[18][6] + t->Phi[124]*f->P[19][6] + t->Phi[125]*f->P[20][6] +
-            t->Phi[126]*f->P[21][6] + t->Phi[127]*f->P[22][6] + t->Phi[128]*f->P[23][6] +
-            t->Phi[129]*f->P[24][6] + t->Phi[130]*f->P[25][6] + t->Phi[131]*f->P[26][6] +
-            t->Phi[132]*f->P[27][6] + t->Phi[133]*f->P[28][6] + t->Phi[134]*f->P[29][6];
-    w->M[7] = t->Phi[108]*f->P[0][7] + t->Phi[109]*f->P[1][7] + t->Phi[110]*f->P[2][7] +
-            t->Phi[111]*f->P[3][7] + t->Phi[112]*f->P[4][7] + t->Phi[113]*f->P[5][7] +
-            t->Phi[114]*f->P[7][7] + t->Phi[115]*f->P[8][7] + t->Phi[116]*f->P[9][7] +
-            t->Phi[117]*f->P[10][7] + t->Phi[118]*f->P[11][7] + t->Phi[119]*f->P[12][7] +
-            t->Phi[120]*f->P[13][7] + t->Phi[121]*f->P[14][7] + t->Phi[122]*f->P[15][7] +
-            t->Phi[123]*f->P[18][7] + t->Phi[124]*f->P[19][7] + t->Phi[125]*f->P[20][7] +
-            t->Phi[126]*f->P[21][7] + t->Phi[127]*f->P[22][7] + t->Phi[128]*f->P[23][7] +
-            t->Phi[129]*f->P[24][7] + t->Phi[130]*f->P[25][7] + t->Phi[131]*f->P[26][7] +
-            t->Phi[132]*f->P[27][7] + t->Phi[133]*f->P[28][7] + t->Phi[134]*f->P[29][7];
-    w->M[8] = t->Phi[108]*f->P[0][8] + t->Phi[109]*f->P[1][8] + t->Phi[110]*f->P[2][8] +
-            t->Phi[111]*f->P[3][8] + t->Phi[112]*f->P[4][8] + t->Phi[113]*f->P[5][8] +
-            t->Phi[114]*f->P[7][8] + t->Phi[115]*f->P[8][8] + t->Phi[116]*f->P[9][8] +
-            t->Phi[117]*f->P[10][8] + t->Phi[118]*f->P[11][8] + t->Phi[119]*f->P[12][8] +
-            t->Phi[120]*f->P[13][8] + t->Phi[121]*f->P[14][8] + t->Phi[122]*f->P[15][8] +
-            t->Phi[123]*f->P[18][8] + t->Phi[124]*f->P[19][8] + t->Phi[125]*f->P[20][8] +
-            t->Phi[126]*f->P[21][8] + t->Phi[127]*f->P[22][8] + t->Phi[128]*f->P[23][8] +
-            t->Phi[129]*f->P[24][8] + t->Phi[130]*f->P[25][8] + t->Phi[131]*f->P[26][8] +
-            t->Phi[132]*f->P[27][8] + t->Phi[133]*f->P[28][8] + t->Phi[134]*f->P[29][8];
-    w->M[9] = t->Phi[108]*f->P[0][9] + t->Phi[109]*f->P[1][9] + t->Phi[110]*f->P[2][9] +
-            t->Phi[111]*f->P[3][9] + t->Phi[112]*f->P[4][9] + t->Phi[113]*f->P[5][9] +
-            t->Phi[114]*f->P[7][9] + t->Phi[115]*f->P[8][9] + t->Phi[116]*f->P[9][9] +
-            t->Phi[117]*f->P[10][9] + t->Phi[118]*f->P[11][9] + t->Phi[119]*f->P[12][9] +
-            t->Phi[120]*f->P[13][9] + t->Phi[121]*f->P[14][9] + t->Phi[122]*f->P[15][9] +
-            t->Phi[123]*f->P[18][9] + t->Phi[124]*f->P[19][9] + t->Phi[125]*f->P[20][9] +
-            t->Phi[126]*f->P[21][9] + t->Phi[127]*f->P[22][9] + t->Phi[128]*f->P[23][9] +
-            t->Phi[129]*f->P[24][9] + t->Phi[130]*f->P[25][9] + t->Phi[131]*f->P[26][9] +
-            t->Phi[132]*f->P[27][9] + t->Phi[133]*f->P[28][9] + t->Phi[134]*f->P[29][9];
-    w->M[10] = t->Phi[108]*f->P[0][10] + t->Phi[109]*f->P[1][10] + t->Phi[110]*f->P[2][10] +
-            t->Phi[111]*f->P[3][10] + t->Phi[112]*f->P[4][10] + t->Phi[113]*f->P[5][10] +
-            t->Phi[114]*f->P[7][10] + t->Phi[115]*f->P[8][10] + t->Phi[116]*f->P[9][10] +
-            t->Phi[117]*f->P[10][10] + t->Phi[118]*f->P[11][10] + t->Phi[119]*f->P[12][10] +
-            t->Phi[120]*f->P[13][10] + t->Phi[121]*f->P[14][10] + t->Phi[122]*f->P[15][10] +
-            t->Phi[123]*f->P[18][10] + t->Phi[124]*f->P[19][10] + t->Phi[125]*f->P[20][10] +
-            t->Phi[126]*f->P[21][10] + t->Phi[127]*f->P[22][10] + t->Phi[128]*f->P[23][10] +
-            t->Phi[129]*f->P[24][10] + t->Phi[130]*f->P[25][10] + t->Phi[131]*f->P[26][10] +
-            t->Phi[132]*f->P[27][10] + t->Phi[133]*f->P[28][10] + t->Phi[134]*f->P[29][10];
-    w->M[11] = t->Phi[108]*f->P[0][11] + t->Phi[109]*f->P[1][11] + t->Phi[110]*f->P[2][11] +
-            t->Phi[111]*f->P[3][11] + t->Phi[112]*f->P[4][11] + t->Phi[113]*f->P[5][11] +
-            t->Phi[114]*f->P[7][11] + t->Phi[115]*f->P[8][11] + t->Phi[116]*f->P[9][11] +
-            t->Phi[117]*f->P[10][11] + t->Phi[118]*f->P[11][11] + t->Phi[119]*f->P[12][11] +
-            t->Phi[120]*f->P[13][11] + t->Phi[121]*f->P[14][11] + t->Phi[122]*f->P[15][11] +
-            t->Phi[123]*f->P[18][11] + t->Phi[124]*f->P[19][11] + t->Phi[125]*f->P[20][11] +
-            t->Phi[126]*f->P[21][11] + t->Phi[127]*f->P[22][11] + t->Phi[128]*f->P[23][11] +
-            t->Phi[129]*f->P[24][11] + t->Phi[130]*f->P[25][11] + t->Phi[131]*f->P[26][11] +
-            t->Phi[132]*f->P[27][11] + t->Phi[133]*f->P[28][11] + t->Phi[134]*f->P[29][11];
-    w->M[12] = t->Phi[108]*f->P[0][12] + t->Phi[109]*f->P[1][12] + t->Phi[110]*f->P[2][12] +
-            t->Phi[111]*f->P[3][12] + t->Phi[112]*f->P[4][12] + t->Phi[113]*f->P[5][12] +
-            t->Phi[114]*f->P[7][12] + t->Phi[115]*f->P[8][12] + t->Phi[116]*f->P[9][12] +
-            t->Phi[117]*f->P[10][12] + t->Phi[118]*f->P[11][12] + t->Phi[119]*f->P[12][12] +
-            t->Phi[120]*f->P[13][12] + t->Phi[121]*f->P[14][12] + t->Phi[122]*f->P[15][12] +
-            t->Phi[123]*f->P[18][12] + t->Phi[124]*f->P[19][12] + t->Phi[125]*f->P[20][12] +
-            t->Phi[126]*f->P[21][12] + t->Phi[127]*f->P[22][12] + t->Phi[128]*f->P[23][12] +
-            t->Phi[129]*f->P[24][12] + t->Phi[130]*f->P[25][12] + t->Phi[131]*f->P[26][12] +
-            t->Phi[132]*f->P[27][12] + t->Phi[133]*f->P[28][12] + t->Phi[134]*f->P[29][12];
-    w->M[13] = t->Phi[108]*f->P[0][13] + t->Phi[109]*f->P[1][13] + t->Phi[110]*f->P[2][13] +
-            t->Phi[111]*f->P[3][13] + t->Phi[112]*f->P[4][13] + t->Phi[113]*f->P[5][13] +
-            t->Phi[114]*f->P[7][13] + t->Phi[115]*f->P[8][13] + t->Phi[116]*f->P[9][13] +
-            t->Phi[117]*f->P[10][13] + t->Phi[118]*f->P[11][13] + t->Phi[119]*f->P[12][13] +
-            t->Phi[120]*f->P[13][13] + t->Phi[121]*f->P[14][13] + t->Phi[122]*f->P[15][13] +
-            t->Phi[123]*f->P[18][13] + t->Phi[124]*f->P[19][13] + t->Phi[125]*f->P[20][13] +
-            t->Phi[126]*f->P[21][13] + t->Phi[127]*f->P[22][13] + t->Phi[128]*f->P[23][13] +
-            t->Phi[129]*f->P[24][13] + t->Phi[130]*f->P[25][13] + t->Phi[131]*f->P[26][13] +
-            t->Phi[132]*f->P[27][13] + t->Phi[133]*f->P[28][13] + t->Phi[134]*f->P[29][13];
-    w->M[14] = t->Phi[108]*f->P[0][14] + t->Phi[109]*f->P[1][14] + t->Phi[110]*f->P[2][14] +
-            t->Phi[111]*f->P[3][14] + t->Phi[112]*f->P[4][14] + t->Phi[113]*f->P[5][14] +
-            t->Phi[114]*f->P[7][14] + t->Phi[115]*f->P[8][14] + t->Phi[116]*f->P[9][14] +
-            t->Phi[117]*f->P[10][14] + t->Phi[118]*f->P[11][14] + t->Phi[119]*f->P[12][14] +
-            t->Phi[120]*f->P[13][14] + t->Phi[121]*f->P[14][14] + t->Phi[122]*f->P[15][14] +
-            t->Phi[123]*f->P[18][14] + t->Phi[124]*f->P[19][14] + t->Phi[125]*f->P[20][14] +
-            t->Phi[126]*f->P[21][14] + t->Phi[127]*f->P[22][14] + t->Phi[128]*f->P[23][14] +
-            t->Phi[129]*f->P[24][14] + t->Phi[130]*f->P[25][14] + t->Phi[131]*f->P[26][14] +
-            t->Phi[132]*f->P[27][14] + t->Phi[133]*f->P[28][14] + t->Phi[134]*f->P[29][14];
-    w->M[15] = t->Phi[108]*f->P[0][15] + t->Phi[109]*f->P[1][15] + t->Phi[110]*f->P[2][15] +
-            t->Phi[111]*f->P[3][15] + t->Phi[112]*f->P[4][15] + t->Phi[113]*f->P[5][15] +
-            t->Phi[114]*f->P[7][15] + t->Phi[115]*f->P[8][15] + t->Phi[116]*f->P[9][15] +
-            t->Phi[117]*f->P[10][15] + t->Phi[118]*f->P[11][15] + t->Phi[119]*f->P[12][15] +
-            t->Phi[120]*f->P[13][15] + t->Phi[121]*f->P[14][15] + t->Phi[122]*f->P[15][15] +
-            t->Phi[123]*f->P[18][15] + t->Phi[124]*f->P[19][15] + t->Phi[125]*f->P[20][15] +
-            t->Phi[126]*f->P[21][15] + t->Phi[127]*f->P[22][15] + t->Phi[128]*f->P[23][15] +
-            t->Phi[129]*f->P[24][15] + t->Phi[130]*f->P[25][15] + t->Phi[131]*f->P[26][15] +
-            t->Phi[132]*f->P[27][15] + t->Phi[133]*f->P[28][15] + t->Phi[134]*f->P[29][15];
-    w->M[16] = t->Phi[108]*f->P[0][16] + t->Phi[109]*f->P[1][16] + t->Phi[110]*f->P[2][16] +
-            t->Phi[111]*f->P[3][16] + t->Phi[112]*f->P[4][16] + t->Phi[113]*f->P[5][16] +
-            t->Phi[114]*f->P[7][16] + t->Phi[115]*f->P[8][16] + t->Phi[116]*f->P[9][16] +
-            t->Phi[117]*f->P[10][16] + t->Phi[118]*f->P[11][16] + t->Phi[119]*f->P[12][16] +
-            t->Phi[120]*f->P[13][16] + t->Phi[121]*f->P[14][16] + t->Phi[122]*f->P[15][16] +
-            t->Phi[123]*f->P[18][16] + t->Phi[124]*f->P[19][16] + t->Phi[125]*f->P[20][16] +
-            t->Phi[126]*f->P[21][16] + t->Phi[127]*f->P[22][16] + t->Phi[128]*f->P[23][16] +
-            t->Phi[129]*f->P[24][16] + t->Phi[130]*f->P[25][16] + t->Phi[131]*f->P[26][16] +
-            t->Phi[132]*f->P[27][16] + t->Phi[133]*f->P[28][16] + t->Phi[134]*f->P[29][16];
-    w->M[17] = t->Phi[108]*f->P[0][17] + t->Phi[109]*f->P[1][17] + t->Phi[110]*f->P[2][17] +
-            t->Phi[111]*f->P[3][17] + t->Phi[112]*f->P[4][17] + t->Phi[113]*f->P[5][17] +
-            t->Phi[114]*f->P[7][17] + t->Phi[115]*f->P[8][17] + t->Phi[116]*f->P[9][17] +
-            t->Phi[117]*f->P[10][17] + t->Phi[118]*f->P[11][17] + t->Phi[119]*f->P[12][17] +
-            t->Phi[120]*f->P[13][17] + t->Phi[121]*f->P[14][17] + t->Phi[122]*f->P[15][17] +
-            t->Phi[123]*f->P[18][17] + t->Phi[124]*f->P[19][17] + t->Phi[125]*f->P[20][17] +
-            t->Phi[126]*f->P[21][17] + t->Phi[127]*f->P[22][17] + t->Phi[128]*f->P[23][17] +
-            t->Phi[129]*f->P[24][17] + t->Phi[130]*f->P[25][17] + t->Phi[131]*f->P[26][17] +
-            t->Phi[132]*f->P[27][17] + t->Phi[133]*f->P[28][17] + t->Phi[134]*f->P[29][17];
-    w->M[18] = t->Phi[108]*f->P[0][18] + t->Phi[109]*f->P[1][18] + t->Phi[110]*f->P[2][18] +
-            t->Phi[111]*f->P[3][18] + t->Phi[112]*f->P[4][18] + t->Phi[113]*f->P[5][18] +
-            t->Phi[114]*f->P[7][18] + t->Phi[115]*f->P[8][18] + t->Phi[116]*f->P[9][18] +
-            t->Phi[117]*f->P[10][18] + t->Phi[118]*f->P[11][18] + t->Phi[119]*f->P[12][18] +
-            t->Phi[120]*f->P[13][18] + t->Phi[121]*f->P[14][18] + t->Phi[122]*f->P[15][18] +
-            t->Phi[123]*f->P[18][18] + t->Phi[124]*f->P[19][18] + t->Phi[125]*f->P[20][18] +
-            t->Phi[126]*f->P[21][18] + t->Phi[127]*f->P[22][18] + t->Phi[128]*f->P[23][18] +
-            t->Phi[129]*f->P[24][18] + t->Phi[130]*f->P[25][18] + t->Phi[131]*f->P[26][18] +
-            t->Phi[132]*f->P[27][18] + t->Phi[133]*f->P[28][18] + t->Phi[134]*f->P[29][18];
-    w->M[19] = t->Phi[108]*f->P[0][19] + t->Phi[109]*f->P[1][19] + t->Phi[110]*f->P[2][19] +
-            t->Phi[111]*f->P[3][19] + t->Phi[112]*f->P[4][19] + t->Phi[113]*f->P[5][19] +
-            t->Phi[114]*f->P[7][19] + t->Phi[115]*f->P[8][19] + t->Phi[116]*f->P[9][19] +
-            t->Phi[117]*f->P[10][19] + t->Phi[118]*f->P[11][19] + t->Phi[119]*f->P[12][19] +
-            t->Phi[120]*f->P[13][19] + t->Phi[121]*f->P[14][19] + t->Phi[122]*f->P[15][19] +
-            t->Phi[123]*f->P[18][19] + t->Phi[124]*f->P[19][19] + t->Phi[125]*f->P[20][19] +
-            t->Phi[126]*f->P[21][19] + t->Phi[127]*f->P[22][19] + t->Phi[128]*f->P[23][19] +
-            t->Phi[129]*f->P[24][19] + t->Phi[130]*f->P[25][19] + t->Phi[131]*f->P[26][19] +
-            t->Phi[132]*f->P[27][19] + t->Phi[133]*f->P[28][19] + t->Phi[134]*f->P[29][19];
-    w->M[20] = t->Phi[108]*f->P[0][20] + t->Phi[109]*f->P[1][20] + t->Phi[110]*f->P[2][20] +
-            t->Phi[111]*f->P[3][20] + t->Phi[112]*f->P[4][20] + t->Phi[113]*f->P[5][20] +
-            t->Phi[114]*f->P[7][20] + t->Phi[115]*f->P[8][20] + t->Phi[116]*f->P[9][20] +
-            t->Phi[117]*f->P[10][20] + t->Phi[118]*f->P[11][20] + t->Phi[119]*f->P[12][20] +
-            t->Phi[120]*f->P[13][20] + t->Phi[121]*f->P[14][20] + t->Phi[122]*f->P[15][20] +
-            t->Phi[123]*f->P[18][20] + t->Phi[124]*f->P[19][20] + t->Phi[125]*f->P[20][20] +
-            t->Phi[126]*f->P[21][20] + t->Phi[127]*f->P[22][20] + t->Phi[128]*f->P[23][20] +
-            t->Phi[129]*f->P[24][20] + t->Phi[130]*f->P[25][20] + t->Phi[131]*f->P[26][20] +
-            t->Phi[132]*f->P[27][20] + t->Phi[133]*f->P[28][20] + t->Phi[134]*f->P[29][20];
-    w->M[21] = t->Phi[108]*f->P[0][21] + t->Phi[109]*f->P[1][21] + t->Phi[110]*f->P[2][21] +
-            t->Phi[111]*f->P[3][21] + t->Phi[112]*f->P[4][21] + t->Phi[113]*f->P[5][21] +
-            t->Phi[114]*f->P[7][21] + t->Phi[115]*f->P[8][21] + t->Phi[116]*f->P[9][21] +
-            t->Phi[117]*f->P[10][21] + t->Phi[118]*f->P[11][21] + t->Phi[119]*f->P[12][21] +
-            t->Phi[120]*f->P[13][21] + t->Phi[121]*f->P[14][21] + t->Phi[122]*f->P[15][21] +
-            t->Phi[123]*f->P[18][21] + t->Phi[124]*f->P[19][21] + t->Phi[125]*f->P[20][21] +
-            t->Phi[126]*f->P[21][21] + t->Phi[127]*f->P[22][21] + t->Phi[128]*f->P[23][21] +
-            t->Phi[129]*f->P[24][21] + t->Phi[130]*f->P[25][21] + t->Phi[131]*f->P[26][21] +
-            t->Phi[132]*f->P[27][21] + t->Phi[133]*f->P[28][21] + t->Phi[134]*f->P[29][21];
-    w->M[22] = t->Phi[108]*f->P[0][22] + t->Phi[109]*f->P[1][22] + t->Phi[110]*f->P[2][22] +
-            t->Phi[111]*f->P[3][22] + t->Phi[112]*f->P[4][22] + t->Phi[113]*f->P[5][22] +
-            t->Phi[114]*f->P[7][22] + t->Phi[115]*f->P[8][22] + t->Phi[116]*f->P[9][22] +
-            t->Phi[117]*f->P[10][22] + t->Phi[118]*f->P[11][22] + t->Phi[119]*f->P[12][22] +
-            t->Phi[120]*f->P[13][22] + t->Phi[121]*f->P[14][22] + t->Phi[122]*f->P[15][22] +
-            t->Phi[123]*f->P[18][22] + t->Phi[124]*f->P[19][22] + t->Phi[125]*f->P[20][22] +
-            t->Phi[126]*f->P[21][22] + t->Phi[127]*f->P[22][22] + t->Phi[128]*f->P[23][22] +
-            t->Phi[129]*f->P[24][22] + t->Phi[130]*f->P[25][22] + t->Phi[131]*f->P[26][22] +
-            t->Phi[132]*f->P[27][22] + t->Phi[133]*f->P[28][22] + t->Phi[134]*f->P[29][22];
-    w->M[23] = t->Phi[108]*f->P[0][23] + t->Phi[109]*f->P[1][23] + t->Phi[110]*f->P[2][23] +
-            t->Phi[111]*f->P[3][23] + t->Phi[112]*f->P[4][23] + t->Phi[113]*f->P[5][23] +
-            t->Phi[114]*f->P[7][23] + t->Phi[115]*f->P[8][23] + t->Phi[116]*f->P[9][23] +
-            t->Phi[117]*f->P[10][23] + t->Phi[118]*f->P[11][23] + t->Phi[119]*f->P[12][23] +
-            t->Phi[120]*f->P[13][23] + t->Phi[121]*f->P[14][23] + t->Phi[122]*f->P[15][23] +
-            t->Phi[123]*f->P[18][23] + t->Phi[124]*f->P[19][23] + t->Phi[125]*f->P[20][23] +
-            t->Phi[126]*f->P[21][23] + t->Phi[127]*f->P[22][23] + t->Phi[128]*f->P[23][23] +
-            t->Phi[129]*f->P[24][23] + t->Phi[130]*f->P[25][23] + t->Phi[131]*f->P[26][23] +
-            t->Phi[132]*f->P[27][23] + t->Phi[133]*f->P[28][23] + t->Phi[134]*f->P[29][23];
-    w->M[24] = t->Phi[108]*f->P[0][24] + t->Phi[109]*f->P[1][24] + t->Phi[110]*f->P[2][24] +
-            t->Phi[111]*f->P[3][24] + t->Phi[112]*f->P[4][24] + t->Phi[113]*f->P[5][24] +
-            t->Phi[114]*f->P[7][24] + t->Phi[115]*f->P[8][24] + t->Phi[116]*f->P[9][24] +
-            t->Phi[117]*f->P[10][24] + t->Phi[118]*f->P[11][24] + t->Phi[119]*f->P[12][24] +
-            t->Phi[120]*f->P[13][24] + t->Phi[121]*f->P[14][24] + t->Phi[122]*f->P[15][24] +
-            t->Phi[123]*f->P[18][24] + t->Phi[124]*f->P[19][24] + t->Phi[125]*f->P[20][24] +
-            t->Phi[126]*f->P[21][24] + t->Phi[127]*f->P[22][24] + t->Phi[128]*f->P[23][24] +
-            t->Phi[129]*f->P[24][24] + t->Phi[130]*f->P[25][24] + t->Phi[131]*f->P[26][24] +
-            t->Phi[132]*f->P[27][24] + t->Phi[133]*f->P[28][24] + t->Phi[134]*f->P[29][24];
-    w->M[25] = t->Phi[108]*f->P[0][25] + t->Phi[109]*f->P[1][25] + t->Phi[110]*f->P[2][25] +
-            t->Phi[111]*f->P[3][25] + t->Phi[112]*f->P[4][25] + t->Phi[113]*f->P[5][25] +
-            t->Phi[114]*f->P[7][25] + t->Phi[115]*f->P[8][25] + t->Phi[116]*f->P[9][25] +
-            t->Phi[117]*f->P[10][25] + t->Phi[118]*f->P[11][25] + t->Phi[119]*f->P[12][25] +
-            t->Phi[120]*f->P[13][25] + t->Phi[121]*f->P[14][25] + t->Phi[122]*f->P[15][25] +
-            t->Phi[123]*f->P[18][25] + t->Phi[124]*f->P[19][25] + t->Phi[125]*f->P[20][25] +
-            t->Phi[126]*f->P[21][25] + t->Phi[127]*f->P[22][25] + t->Phi[128]*f->P[23][25] +
-            t->Phi[129]*f->P[24][25] + t->Phi[130]*f->P[25][25] + t->Phi[131]*f->P[26][25] +
-            t->Phi[132]*f->P[27][25] + t->Phi[133]*f->P[28][25] + t->Phi[134]*f->P[29][25];
-    w->M[26] = t->Phi[108]*f->P[0][26] + t->Phi[109]*f->P[1][26] + t->Phi[110]*f->P[2][26] +
-            t->Phi[111]*f->P[3][26] + t->Phi[112]*f->P[4][26] + t->Phi[113]*f->P[5][26] +
-            t->Phi[114]*f->P[7][26] + t->Phi[115]*f->P[8][26] + t->Phi[116]*f->P[9][26] +
-            t->Phi[117]*f->P[10][26] + t->Phi[118]*f->P[11][26] + t->Phi[119]*f->P[12][26] +
-            t->Phi[120]*f->P[13][26] + t->Phi[121]*f->P[14][26] + t->Phi[122]*f->P[15][26] +
-            t->Phi[123]*f->P[18][26] + t->Phi[124]*f->P[19][26] + t->Phi[125]*f->P[20][26] +
-            t->Phi[126]*f->P[21][26] + t->Phi[127]*f->P[22][26] + t->Phi[128]*f->P[23][26] +
-            t->Phi[129]*f->P[24][26] + t->Phi[130]*f->P[25][26] + t->Phi[131]*f->P[26][26] +
-            t->Phi[132]*f->P[27][26] + t->Phi[133]*f->P[28][26] + t->Phi[134]*f->P[29][26];
-    w->M[27] = t->Phi[108]*f->P[0][27] + t->Phi[109]*f->P[1][27] + t->Phi[110]*f->P[2][27] +
-            t->Phi[111]*f->P[3][27] + t->Phi[112]*f->P[4][27] + t->Phi[113]*f->P[5][27] +
-            t->Phi[114]*f->P[7][27] + t->Phi[115]*f->P[8][27] + t->Phi[116]*f->P[9][27] +
-            t->Phi[117]*f->P[10][27] + t->Phi[118]*f->P[11][27] + t->Phi[119]*f->P[12][27] +
-            t->Phi[120]*f->P[13][27] + t->Phi[121]*f->P[14][27] + t->Phi[122]*f->P[15][27] +
-            t->Phi[123]*f->P[18][27] + t->Phi[124]*f->P[19][27] + t->Phi[125]*f->P[20][27] +
-            t->Phi[126]*f->P[21][27] + t->Phi[127]*f->P[22][27] + t->Phi[128]*f->P[23][27] +
-            t->Phi[129]*f->P[24][27] + t->Phi[130]*f->P[25][27] + t->Phi[131]*f->P[26][27] +
-            t->Phi[132]*f->P[27][27] + t->Phi[133]*f->P[28][27] + t->Phi[134]*f->P[29][27];
-    w->M[28] = t->Phi[108]*f->P[0][28] + t->Phi[109]*f->P[1][28] + t->Phi[110]*f->P[2][28] +
-            t->Phi[111]*f->P[3][28] + t->Phi[112]*f->P[4][28] + t->Phi[113]*f->P[5][28] +
-            t->Phi[114]*f->P[7][28] + t->Phi[115]*f->P[8][28] + t->Phi[116]*f->P[9][28] +
-            t->Phi[117]*f->P[10][28] + t->Phi[118]*f->P[11][28] + t->Phi[119]*f->P[12][28] +
-            t->Phi[120]*f->P[13][28] + t->Phi[121]*f->P[14][28] + t->Phi[122]*f->P[15][28] +
-            t->Phi[123]*f->P[18][28] + t->Phi[124]*f->P[19][28] + t->Phi[125]*f->P[20][28] +
-            t->Phi[126]*f->P[21][28] + t->Phi[127]*f->P[22][28] + t->Phi[128]*f->P[23][28] +
-            t->Phi[129]*f->P[24][28] + t->Phi[130]*f->P[25][28] + t->Phi[131]*f->P[26][28] +
-            t->Phi[132]*f->P[27][28] + t->Phi[133]*f->P[28][28] + t->Phi[134]*f->P[29][28];
-    w->M[29] = t->Phi[108]*f->P[0][29] + t->Phi[109]*f->P[1][29] + t->Phi[110]*f->P[2][29] +
-            t->Phi[111]*f->P[3][29] + t->Phi[112]*f->P[4][29] + t->Phi[113]*f->P[5][29] +
-            t->Phi[114]*f->P[7][29] + t->Phi[115]*f->P[8][29] + t->Phi[116]*f->P[9][29] +
-            t->Phi[117]*f->P[10][29] + t->Phi[118]*f->P[11][29] + t->Phi[119]*f->P[12][29] +
-            t->Phi[120]*f->P[13][29] + t->Phi[121]*f->P[14][29] + t->Phi[122]*f->P[15][29] +
-            t->Phi[123]*f->P[18][29] + t->Phi[124]*f->P[19][29] + t->Phi[125]*f->P[20][29] +
-            t->Phi[126]*f->P[21][29] + t->Phi[127]*f->P[22][29] + t->Phi[128]*f->P[23][29] +
-            t->Phi[129]*f->P[24][29] + t->Phi[130]*f->P[25][29] + t->Phi[131]*f->P[26][29] +
-            t->Phi[132]*f->P[27][29] + t->Phi[133]*f->P[28][29] + t->Phi[134]*f->P[29][29];
-    w->M[30] = t->Phi[108]*f->P[0][30] + t->Phi[109]*f->P[1][30] + t->Phi[110]*f->P[2][30] +
-            t->Phi[111]*f->P[3][30] + t->Phi[112]*f->P[4][30] + t->Phi[113]*f->P[5][30] +
-            t->Phi[114]*f->P[7][30] + t->Phi[115]*f->P[8][30] + t->Phi[116]*f->P[9][30] +
-            t->Phi[117]*f->P[10][30] + t->Phi[118]*f->P[11][30] + t->Phi[119]*f->P[12][30] +
-            t->Phi[120]*f->P[13][30] + t->Phi[121]*f->P[14][30] + t->Phi[122]*f->P[15][30] +
-            t->Phi[123]*f->P[18][30] + t->Phi[124]*f->P[19][30] + t->Phi[125]*f->P[20][30] +
-            t->Phi[126]*f->P[21][30] + t->Phi[127]*f->P[22][30] + t->Phi[128]*f->P[23][30] +
-            t->Phi[129]*f->P[24][30] + t->Phi[130]*f->P[25][30] + t->Phi[131]*f->P[26][30] +
-            t->Phi[132]*f->P[27][30] + t->Phi[133]*f->P[28][30] + t->Phi[134]*f->P[29][30];
-    w->M[31] = t->Phi[108]*f->P[0][31] + t->Phi[109]*f->P[1][31] + t->Phi[110]*f->P[2][31] +
-            t->Phi[111]*f->P[3][31] + t->Phi[112]*f->P[4][31] + t->Phi[113]*f->P[5][31] +
-            t->Phi[114]*f->P[7][31] + t->Phi[115]*f->P[8][31] + t->Phi[116]*f->P[9][31] +
-            t->Phi[117]*f->P[10][31] + t->Phi[118]*f->P[11][31] + t->Phi[119]*f->P[12][31] +
-            t->Phi[120]*f->P[13][31] + t->Phi[121]*f->P[14][31] + t->Phi[122]*f->P[15][31] +
-            t->Phi[123]*f->P[18][31] + t->Phi[124]*f->P[19][31] + t->Phi[125]*f->P[20][31] +
-            t->Phi[126]*f->P[21][31] + t->Phi[127]*f->P[22][31] + t->Phi[128]*f->P[23][31] +
-            t->Phi[129]*f->P[24][31] + t->Phi[130]*f->P[25][31] + t->Phi[131]*f->P[26][31] +
-            t->Phi[132]*f->P[27][31] + t->Phi[133]*f->P[28][31] + t->Phi[134]*f->P[29][31];
+    int c;
+    lane_pair b[27];
+    b[0] = lane_pair_of(t->Phi[108], t->Phi[108]);
+    b[1] = lane_pair_of(t->Phi[109], t->Phi[109]);
+    b[2] = lane_pair_of(t->Phi[110], t->Phi[110]);
+    b[3] = lane_pair_of(t->Phi[111], t->Phi[111]);
+    b[4] = lane_pair_of(t->Phi[112], t->Phi[112]);
+    b[5] = lane_pair_of(t->Phi[113], t->Phi[113]);
+    b[6] = lane_pair_of(t->Phi[114], t->Phi[114]);
+    b[7] = lane_pair_of(t->Phi[115], t->Phi[115]);
+    b[8] = lane_pair_of(t->Phi[116], t->Phi[116]);
+    b[9] = lane_pair_of(t->Phi[117], t->Phi[117]);
+    b[10] = lane_pair_of(t->Phi[118], t->Phi[118]);
+    b[11] = lane_pair_of(t->Phi[119], t->Phi[119]);
+    b[12] = lane_pair_of(t->Phi[120], t->Phi[120]);
+    b[13] = lane_pair_of(t->Phi[121], t->Phi[121]);
+    b[14] = lane_pair_of(t->Phi[122], t->Phi[122]);
+    b[15] = lane_pair_of(t->Phi[123], t->Phi[123]);
+    b[16] = lane_pair_of(t->Phi[124], t->Phi[124]);
+    b[17] = lane_pair_of(t->Phi[125], t->Phi[125]);
+    b[18] = lane_pair_of(t->Phi[126], t->Phi[126]);
+    b[19] = lane_pair_of(t->Phi[127], t->Phi[127]);
+    b[20] = lane_pair_of(t->Phi[128], t->Phi[128]);
+    b[21] = lane_pair_of(t->Phi[129], t->Phi[129]);
+    b[22] = lane_pair_of(t->Phi[130], t->Phi[130]);
+    b[23] = lane_pair_of(t->Phi[131], t->Phi[131]);
+    b[24] = lane_pair_of(t->Phi[132], t->Phi[132]);
+    b[25] = lane_pair_of(t->Phi[133], t->Phi[133]);
+    b[26] = lane_pair_of(t->Phi[134], t->Phi[134]);
+    for (c = 0; c + 1 < 32; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[18][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[19][c]));
+        acc = lane_pair_add_product(acc, b[17], lane_pair_load(&f->P[20][c]));
+        acc = lane_pair_add_product(acc, b[18], lane_pair_load(&f->P[21][c]));
+        acc = lane_pair_add_product(acc, b[19], lane_pair_load(&f->P[22][c]));
+        acc = lane_pair_add_product(acc, b[20], lane_pair_load(&f->P[23][c]));
+        acc = lane_pair_add_product(acc, b[21], lane_pair_load(&f->P[24][c]));
+        acc = lane_pair_add_product(acc, b[22], lane_pair_load(&f->P[25][c]));
+        acc = lane_pair_add_product(acc, b[23], lane_pair_load(&f->P[26][c]));
+        acc = lane_pair_add_product(acc, b[24], lane_pair_load(&f->P[27][c]));
+        acc = lane_pair_add_product(acc, b[25], lane_pair_load(&f->P[28][c]));
+        acc = lane_pair_add_product(acc, b[26], lane_pair_load(&f->P[29][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -5718,294 +5139,65 @@ NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_5(const ned_doppler32_augment
         f, const ned_doppler32_augmented_transition *restrict t,
         ned_doppler32_augmented_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[135]*f->P[0][0] + t->Phi[136]*f->P[1][0] + t->Phi[137]*f->P[2][0] +
-            t->Phi[138]*f->P[3][0] + t->Phi[139]*f->P[4][0] + t->Phi[140]*f->P[5][0] +
-            t->Phi[141]*f->P[7][0] + t->Phi[142]*f->P[8][0] + t->Phi[143]*f->P[9][0] +
-            t->Phi[144]*f->P[10][0] + t->Phi[145]*f->P[11][0] + t->Phi[146]*f->P[12][0] +
-            t->Phi[147]*f->P[13][0] + t->Phi[148]*f->P[14][0] + t->Phi[149]*f->P[15][0] +
-            t->Phi[150]*f->P[18][0] + t->Phi[151]*f->P[19][0] + t->Phi[152]*f->P[20][0] +
-            t->Phi[153]*f->P[21][0] + t->Phi[154]*f->P[22][0] + t->Phi[155]*f->P[23][0] +
-            t->Phi[156]*f->P[24][0] + t->Phi[157]*f->P[25][0] + t->Phi[158]*f->P[26][0] +
-            t->Phi[159]*f->P[27][0] + t->Phi[160]*f->P[28][0] + t->Phi[161]*f->P[29][0];
-    w->M[1] = t->Phi[135]*f->P[0][1] + t->Phi[136]*f->P[1][1] + t->Phi[137]*f->P[2][1] +
-            t->Phi[138]*f->P[3][1] + t->Phi[139]*f->P[4][1] + t->Phi[140]*f->P[5][1] +
-            t->Phi[141]*f->P[7][1] + t->Phi[142]*f->P[8][1] + t->Phi[143]*f->P[9][1] +
-            t->Phi[144]*f->P[10][1] + t->Phi[145]*f->P[11][1] + t->Phi[146]*f->P[12][1] +
-            t->Phi[147]*f->P[13][1] + t->Phi[148]*f->P[14][1] + t->Phi[149]*f->P[15][1] +
-            t->Phi[150]*f->P[18][1] + t->Phi[151]*f->P[19][1] + t->Phi[152]*f->P[20][1] +
-            t->Phi[153]*f->P[21][1] + t->Phi[154]*f->P[22][1] + t->Phi[155]*f->P[23][1] +
-            t->Phi[156]*f->P[24][1] + t->Phi[157]*f->P[25][1] + t->Phi[158]*f->P[26][1] +
-            t->Phi[159]*f->P[27][1] + t->Phi[160]*f->P[28][1] + t->Phi[161]*f->P[29][1];
-    w->M[2] = t->Phi[135]*f->P[0][2] + t->Phi[136]*f->P[1][2] + t->Phi[137]*f->P[2][2] +
-            t->Phi[138]*f->P[3][2] + t->Phi[139]*f->P[4][2] + t->Phi[140]*f->P[5][2] +
-            t->Phi[141]*f->P[7][2] + t->Phi[142]*f->P[8][2] + t->Phi[143]*f->P[9][2] +
-            t->Phi[144]*f->P[10][2] + t->Phi[145]*f->P[11][2] + t->Phi[146]*f->P[12][2] +
-            t->Phi[147]*f->P[13][2] + t->Phi[148]*f->P[14][2] + t->Phi[149]*f->P[15][2] +
-            t->Phi[150]*f->P[18][2] + t->Phi[151]*f->P[19][2] + t->Phi[152]*f->P[20][2] +
-            t->Phi[153]*f->P[21][2] + t->Phi[154]*f->P[22][2] + t->Phi[155]*f->P[23][2] +
-            t->Phi[156]*f->P[24][2] + t->Phi[157]*f->P[25][2] + t->Phi[158]*f->P[26][2] +
-            t->Phi[159]*f->P[27][2] + t->Phi[160]*f->P[28][2] + t->Phi[161]*f->P[29][2];
-    w->M[3] = t->Phi[135]*f->P[0][3] + t->Phi[136]*f->P[1][3] + t->Phi[137]*f->P[2][3] +
-            t->Phi[138]*f->P[3][3] + t->Phi[139]*f->P[4][3] + t->Phi[140]*f->P[5][3] +
-            t->Phi[141]*f->P[7][3] + t->Phi[142]*f->P[8][3] + t->Phi[143]*f->P[9][3] +
-            t->Phi[144]*f->P[10][3] + t->Phi[145]*f->P[11][3] + t->Phi[146]*f->P[12][3] +
-            t->Phi[147]*f->P[13][3] + t->Phi[148]*f->P[14][3] + t->Phi[149]*f->P[15][3] +
-            t->Phi[150]*f->P[18][3] + t->Phi[151]*f->P[19][3] + t->Phi[152]*f->P[20][3] +
-            t->Phi[153]*f->P[21][3] + t->Phi[154]*f->P[22][3] + t->Phi[155]*f->P[23][3] +
-            t->Phi[156]*f->P[24][3] + t->Phi[157]*f->P[25][3] + t->Phi[158]*f->P[26][3] +
-            t->Phi[159]*f->P[27][3] + t->Phi[160]*f->P[28][3] + t->Phi[161]*f->P[29][3];
-    w->M[4] = t->Phi[135]*f->P[0][4] + t->Phi[136]*f->P[1][4] + t->Phi[137]*f->P[2][4] +
-            t->Phi[138]*f->P[3][4] + t->Phi[139]*f->P[4][4] + t->Phi[140]*f->P[5][4] +
-            t->Phi[141]*f->P[7][4] + t->Phi[142]*f->P[8][4] + t->Phi[143]*f->P[9][4] +
-            t->Phi[144]*f->P[10][4] + t->Phi[145]*f->P[11][4] + t->Phi[146]*f->P[12][4] +
-            t->Phi[147]*f->P[13][4] + t->Phi[148]*f->P[14][4] + t->Phi[149]*f->P[15][4] +
-            t->Phi[150]*f->P[18][4] + t->Phi[151]*f->P[19][4] + t->Phi[152]*f->P[20][4] +
-            t->Phi[153]*f->P[21][4] + t->Phi[154]*f->P[22][4] + t->Phi[155]*f->P[23][4] +
-            t->Phi[156]*f->P[24][4] + t->Phi[157]*f->P[25][4] + t->Phi[158]*f->P[26][4] +
-            t->Phi[159]*f->P[27][4] + t->Phi[160]*f->P[28][4] + t->Phi[161]*f->P[29][4];
-    w->M[5] = t->Phi[135]*f->P[0][5] + t->Phi[136]*f->P[1][5] + t->Phi[137]*f->P[2][5] +
-            t->Phi[138]*f->P[3][5] + t->Phi[139]*f->P[4][5] + t->Phi[140]*f->P[5][5] +
-            t->Phi[141]*f->P[7][5] + t->Phi[142]*f->P[8][5] + t->Phi[143]*f->P[9][5] +
-            t->Phi[144]*f->P[10][5] + t->Phi[145]*f->P[11][5] + t->Phi[146]*f->P[12][5] +
-            t->Phi[147]*f->P[13][5] + t->Phi[148]*f->P[14][5] + t->Phi[149]*f->P[15][5] +
-            t->Phi[150]*f->P[18][5] + t->Phi[151]*f->P[19][5] + t->Phi[152]*f->P[20][5] +
-            t->Phi[153]*f->P[21][5] + t->Phi[154]*f->P[22][5] + t->Phi[155]*f->P[23][5] +
-            t->Phi[156]*f->P[24][5] + t->Phi[157]*f->P[25][5] + t->Phi[158]*f->P[26][5] +
-            t->Phi[159]*f->P[27][5] + t->Phi[160]*f->P[28][5] + t->Phi[161]*f->P[29][5];
-    w->M[6] = t->Phi[135]*f->P[0][6] + t->Phi[136]*f->P[1][6] + t->Phi[137]*f->P[2][6] +
-            t->Phi[138]*f->P[3][6] + t->Phi[139]*f->P[4][6] + t->Phi[140]*f->P[5][6] +
-            t->Phi[141]*f->P[7][6] + t->Phi[142]*f->P[8][6] + t->Phi[143]*f->P[9][6] +
-            t->Phi[144]*f->P[10][6] + t->Phi[145]*f->P[11][6] + t->Phi[146]*f->P[12][6] +
-            t->Phi[147]*f->P[13][6] + t->Phi[148]*f->P[14][6] + t->Phi[149]*f->P[15][6] +
-            t->Phi[150]*f->P[18][6] + t->Phi[151]*f->P[19][6] + t->Phi[152]*f->P[20][6] +
-            t->Phi[153]*f->P[21][6] + t->Phi[154]*f->P[22][6] + t->Phi[155]*f->P[23][6] +
-            t->Phi[156]*f->P[24][6] + t->Phi[157]*f->P[25][6] + t->Phi[158]*f->P[26][6] +
-            t->Phi[159]*f->P[27][6] + t->Phi[160]*f->P[28][6] + t->Phi[161]*f->P[29][6];
-    w->M[7] = t->Phi[135]*f->P[0][7] + t->Phi[136]*f->P[1][7] + t->Phi[137]*f->P[2][7] +
-            t->Phi[138]*f->P[3][7] + t->Phi[139]*f->P[4][7] + t->Phi[140]*f->P[5][7] +
-            t->Phi[141]*f->P[7][7] + t->Phi[142]*f->P[8][7] + t->Phi[143]*f->P[9][7] +
-            t->Phi[144]*f->P[10][7] + t->Phi[145]*f->P[11][7] + t->Phi[146]*f->P[12][7] +
-            t->Phi[147]*f->P[13][7] + t->Phi[148]*f->P[14][7] + t->Phi[149]*f->P[15][7] +
-            t->Phi[150]*f->P[18][7] + t->Phi[151]*f->P[19][7] + t->Phi[152]*f->P[20][7] +
-            t->Phi[153]*f->P[21][7] + t->Phi[154]*f->P[22][7] + t->Phi[155]*f->P[23][7] +
-            t->Phi[156]*f->P[24][7] + t->Phi[157]*f->P[25][7] + t->Phi[158]*f->P[26][7] +
-            t->Phi[159]*f->P[27][7] + t->Phi[160]*f->P[28][7] + t->Phi[161]*f->P[29][7];
-    w->M[8] = t->Phi[135]*f->P[0][8] + t->Phi[136]*f->P[1][8] + t->Phi[137]*f->P[2][8] +
-            t->Phi[138]*f->P[3][8] + t->Phi[139]*f->P[4][8] + t->Phi[140]*f->P[5][8] +
-            t->Phi[141]*f->P[7][8] + t->Phi[142]*f->P[8][8] + t->Phi[143]*f->P[9][8] +
-            t->Phi[144]*f->P[10][8] + t->Phi[145]*f->P[11][8] + t->Phi[146]*f->P[12][8] +
-            t->Phi[147]*f->P[13][8] + t->Phi[148]*f->P[14][8] + t->Phi[149]*f->P[15][8] +
-            t->Phi[150]*f->P[18][8] + t->Phi[151]*f->P[19][8] + t->Phi[152]*f->P[20][8] +
-            t->Phi[153]*f->P[21][8] + t->Phi[154]*f->P[22][8] + t->Phi[155]*f->P[23][8] +
-            t->Phi[156]*f->P[24][8] + t->Phi[157]*f->P[25][8] + t->Phi[158]*f->P[26][8] +
-            t->Phi[159]*f->P[27][8] + t->Phi[160]*f->P[28][8] + t->Phi[161]*f->P[29][8];
-    w->M[9] = t->Phi[135]*f->P[0][9] + t->Phi[136]*f->P[1][9] + t->Phi[137]*f->P[2][9] +
-            t->Phi[138]*f->P[3][9] + t->Phi[139]*f->P[4][9] + t->Phi[140]*f->P[5][9] +
-            t->Phi[141]*f->P[7][9] + t->Phi[142]*f->P[8][9] + t->Phi[143]*f->P[9][9] +
-            t->Phi[144]*f->P[10][9] + t->Phi[145]*f->P[11][9] + t->Phi[146]*f->P[12][9] +
-            t->Phi[147]*f->P[13][9] + t->Phi[148]*f->P[14][9] + t->Phi[149]*f->P[15][9] +
-            t->Phi[150]*f->P[18][9] + t->Phi[151]*f->P[19][9] + t->Phi[152]*f->P[20][9] +
-            t->Phi[153]*f->P[21][9] + t->Phi[154]*f->P[22][9] + t->Phi[155]*f->P[23][9] +
-            t->Phi[156]*f->P[24][9] + t->Phi[157]*f->P[25][9] + t->Phi[158]*f->P[26][9] +
-            t->Phi[159]*f->P[27][9] + t->Phi[160]*f->P[28][9] + t->Phi[161]*f->P[29][9];
-    w->M[10] = t->Phi[135]*f->P[0][10] + t->Phi[136]*f->P[1][10] + t->Phi[137]*f->P[2][10] +
-            t->Phi[138]*f->P[3][10] + t->Phi[139]*f->P[4][10] + t->Phi[140]*f->P[5][10] +
-            t->Phi[141]*f->P[7][10] + t->Phi[142]*f->P[8][10] + t->Phi[143]*f->P[9][10] +
-            t->Phi[144]*f->P[10][10] + t->Phi[145]*f->P[11][10] + t->Phi[146]*f->P[12][10] +
-            t->Phi[147]*f->P[13][10] + t->Phi[148]*f->P[14][10] + t->Phi[149]*f->P[15][10] +
-            t->Phi[150]*f->P[18][10] + t->Phi[151]*f->P[19][10] + t->Phi[152]*f->P[20][10] +
-            t->Phi[153]*f->P[21][10] + t->Phi[154]*f->P[22][10] + t->Phi[155]*f->P[23][10] +
-            t->Phi[156]*f->P[24][10] + t->Phi[157]*f->P[25][10] + t->Phi[158]*f->P[26][10] +
-            t->Phi[159]*f->P[27][10] + t->Phi[160]*f->P[28][10] + t->Phi[161]*f->P[29][10];
-    w->M[11] = t->Phi[135]*f->P[0][11] + t->Phi[136]*f->P[1][11] + t->Phi[137]*f->P[2][11] +
-            t->Phi[138]*f->P[3][11] + t->Phi[139]*f->P[4][11] + t->Phi[140]*f->P[5][11] +
-            t->Phi[141]*f->P[7][11] + t->Phi[142]*f->P[8][11] + t->Phi[143]*f->P[9][11] +
-            t->Phi[144]*f->P[10][11] + t->Phi[145]*f->P[11][11] + t->Phi[146]*f->P[12][11] +
-            t->Phi[147]*f->P[13][11] + t->Phi[148]*f->P[14][11] + t->Phi[149]*f->P[15][11] +
-            t->Phi[150]*f->P[18][11] + t->Phi[151]*f->P[19][11] + t->Phi[152]*f->P[20][11] +
-            t->Phi[153]*f->P[21][11] + t->Phi[154]*f->P[22][11] + t->Phi[155]*f->P[23][11] +
-            t->Phi[156]*f->P[24][11] + t->Phi[157]*f->P[25][11] + t->Phi[158]*f->P[26][11] +
-            t->Phi[159]*f->P[27][11] + t->Phi[160]*f->P[28][11] + t->Phi[161]*f->P[29][11];
-    w->M[12] = t->Phi[135]*f->P[0][12] + t->Phi[136]*f->P[1][12] + t->Phi[137]*f->P[2][12] +
-            t->Phi[138]*f->P[3][12] + t->Phi[139]*f->P[4][12] + t->Phi[140]*f->P[5][12] +
-            t->Phi[141]*f->P[7][12] + t->Phi[142]*f->P[8][12] + t->Phi[143]*f->P[9][12] +
-            t->Phi[144]*f->P[10][12] + t->Phi[145]*f->P[11][12] + t->Phi[146]*f->P[12][12] +
-            t->Phi[147]*f->P[13][12] + t->Phi[148]*f->P[14][12] + t->Phi[149]*f->P[15][12] +
-            t->Phi[150]*f->P[18][12] + t->Phi[151]*f->P[19][12] + t->Phi[152]*f->P[20][12] +
-            t->Phi[153]*f->P[21][12] + t->Phi[154]*f->P[22][12] + t->Phi[155]*f->P[23][12] +
-            t->Phi[156]*f->P[24][12] + t->Phi[157]*f->P[25][12] + t->Phi[158]*f->P[26][12] +
-            t->Phi[159]*f->P[27][12] + t->Phi[160]*f->P[28][12] + t->Phi[161]*f->P[29][12];
-    w->M[13] = t->Phi[135]*f->P[0][13] + t->Phi[136]*f->P[1][13] + t->Phi[137]*f->P[2][13] +
-            t->Phi[138]*f->P[3][13] + t->Phi[139]*f->P[4][13] + t->Phi[140]*f->P[5][13] +
-            t->Phi[141]*f->P[7][13] + t->Phi[142]*f->P[8][13] + t->Phi[143]*f->P[9][13] +
-            t->Phi[144]*f->P[10][13] + t->Phi[145]*f->P[11][13] + t->Phi[146]*f->P[12][13] +
-            t->Phi[147]*f->P[13][13] + t->Phi[148]*f->P[14][13] + t->Phi[149]*f->P[15][13] +
-            t->Phi[150]*f->P[18][13] + t->Phi[151]*f->P[19][13] + t->Phi[152]*f->P[20][13] +
-            t->Phi[153]*f->P[21][13] + t->Phi[154]*f->P[22][13] + t->Phi[155]*f->P[23][13] +
-            t->Phi[156]*f->P[24][13] + t->Phi[157]*f->P[25][13] + t->Phi[158]*f->P[26][13] +
-            t->Phi[159]*f->P[27][13] + t->Phi[160]*f->P[28][13] + t->Phi[161]*f->P[29][13];
-    w->M[14] = t->Phi[135]*f->P[0][14] + t->Phi[136]*f->P[1][14] + t->Phi[137]*f->P[2][14] +
-            t->Phi[138]*f->P[3][14] + t->Phi[139]*f->P[4][14] + t->Phi[140]*f->P[5][14] +
-            t->Phi[141]*f->P[7][14] + t->Phi[142]*f->P[8][14] + t->Phi[143]*f->P[9][14] +
-            t->Phi[144]*f->P[10][14] + t->Phi[145]*f->P[11][14] + t->Phi[146]*f->P[12][14] +
-            t->Phi[147]*f->P[13][14] + t->Phi[148]*f->P[14][14] + t->Phi[149]*f->P[15][14] +
-            t->Phi[150]*f->P[18][14] + t->Phi[151]*f->P[19][14] + t->Phi[152]*f->P[20][14] +
-            t->Phi[153]*f->P[21][14] + t->Phi[154]*f->P[22][14] + t->Phi[155]*f->P[23][14] +
-            t->Phi[156]*f->P[24][14] + t->Phi[157]*f->P[25][14] + t->Phi[158]*f->P[26][14] +
-            t->Phi[159]*f->P[27][14] + t->Phi[160]*f->P[28][14] + t->Phi[161]*f->P[29][14];
-    w->M[15] = t->Phi[135]*f->P[0][15] + t->Phi[136]*f->P[1][15] + t->Phi[137]*f->P[2][15] +
-            t->Phi[138]*f->P[3][15] + t->Phi[139]*f->P[4][15] + t->Phi[140]*f->P[5][15] +
-            t->Phi[141]*f->P[7][15] + t->Phi[142]*f->P[8][15] + t->Phi[143]*f->P[9][15] +
-            t->Phi[144]*f->P[10][15] + t->Phi[145]*f->P[11][15] + t->Phi[146]*f->P[12][15] +
-            t->Phi[147]*f->P[13][15] + t->Phi[148]*f->P[14][15] + t->Phi[149]*f->P[15][15] +
-            t->Phi[150]*f->P[18][15] + t->Phi[151]*f->P[19][15] + t->Phi[152]*f->P[20][15] +
-            t->Phi[153]*f->P[21][15] + t->Phi[154]*f->P[22][15] + t->Phi[155]*f->P[23][15] +
-            t->Phi[156]*f->P[24][15] + t->Phi[157]*f->P[25][15] + t->Phi[158]*f->P[26][15] +
-            t->Phi[159]*f->P[27][15] + t->Phi[160]*f->P[28][15] + t->Phi[161]*f->P[29][15];
-    w->M[16] = t->Phi[135]*f->P[0][16] + t->Phi[136]*f->P[1][16] + t->Phi[137]*f->P[2][16] +
-            t->Phi[138]*f->P[3][16] + t->Phi[139]*f->P[4][16] + t->Phi[140]*f->P[5][16] +
-            t->Phi[141]*f->P[7][16] + t->Phi[142]*f->P[8][16] + t->Phi[143]*f->P[9][16] +
-            t->Phi[144]*f->P[10][16] + t->Phi[145]*f->P[11][16] + t->Phi[146]*f->P[12][16] +
-            t->Phi[147]*f->P[13][16] + t->Phi[148]*f->P[14][16] + t->Phi[149]*f->P[15][16] +
-            t->Phi[150]*f->P[18][16] + t->Phi[151]*f->P[19][16] + t->Phi[152]*f->P[20][16] +
-            t->Phi[153]*f->P[21][16] + t->Phi[154]*f->P[22][16] + t->Phi[155]*f->P[23][16] +
-            t->Phi[156]*f->P[24][16] + t->Phi[157]*f->P[25][16] + t->Phi[158]*f->P[26][16] +
-            t->Phi[159]*f->P[27][16] + t->Phi[160]*f->P[28][16] + t->Phi[161]*f->P[29][16];
-    w->M[17] = t->Phi[135]*f->P[0][17] + t->Phi[136]*f->P[1][17] + t->Phi[137]*f->P[2][17] +
-            t->Phi[138]*f->P[3][17] + t->Phi[139]*f->P[4][17] + t->Phi[140]*f->P[5][17] +
-            t->Phi[141]*f->P[7][17] + t->Phi[142]*f->P[8][17] + t->Phi[143]*f->P[9][17] +
-            t->Phi[144]*f->P[10][17] + t->Phi[145]*f->P[11][17] + t->Phi[146]*f->P[12][17] +
-            t->Phi[147]*f->P[13][17] + t->Phi[148]*f->P[14][17] + t->Phi[149]*f->P[15][17] +
-            t->Phi[150]*f->P[18][17] + t->Phi[151]*f->P[19][17] + t->Phi[152]*f->P[20][17] +
-            t->Phi[153]*f->P[21][17] + t->Phi[154]*f->P[22][17] + t->Phi[155]*f->P[23][17] +
-            t->Phi[156]*f->P[24][17] + t->Phi[157]*f->P[25][17] + t->Phi[158]*f->P[26][17] +
-            t->Phi[159]*f->P[27][17] + t->Phi[160]*f->P[28][17] + t->Phi[161]*f->P[29][17];
-    w->M[18] = t->Phi[135]*f->P[0][18] + t->Phi[136]*f->P[1][18] + t->Phi[137]*f->P[2][18] +
-            t->Phi[138]*f->P[3][18] + t->Phi[139]*f->P[4][18] + t->Phi[140]*f->P[5][18] +
-            t->Phi[141]*f->P[7][18] + t->Phi[142]*f->P[8][18] + t->Phi[143]*f->P[9][18] +
-            t->Phi[144]*f->P[10][18] + t->Phi[145]*f->P[11][18] + t->Phi[146]*f->P[12][18] +
-            t->Phi[147]*f->P[13][18] + t->Phi[148]*f->P[14][18] + t->Phi[149]*f->P[15][18] +
-            t->Phi[150]*f->P[18][18] + t->Phi[151]*f->P[19][18] + t->Phi[152]*f->P[20][18] +
-            t->Phi[153]*f->P[21][18] + t->Phi[154]*f->P[22][18] + t->Phi[155]*f->P[23][18] +
-            t->Phi[156]*f->P[24][18] + t->Phi[157]*f->P[25][18] + t->Phi[158]*f->P[26][18] +
-            t->Phi[159]*f->P[27][18] + t->Phi[160]*f->P[28][18] + t->Phi[161]*f->P[29][18];
-    w->M[19] = t->Phi[135]*f->P[0][19] + t->Phi[136]*f->P[1][19] + t->Phi[137]*f->P[2][19] +
-            t->Phi[138]*f->P[3][19] + t->Phi[139]*f->P[4][19] + t->Phi[140]*f->P[5][19] +
-            t->Phi[141]*f->P[7][19] + t->Phi[142]*f->P[8][19] + t->Phi[143]*f->P[9][19] +
-            t->Phi[144]*f->P[10][19] + t->Phi[145]*f->P[11][19] + t->Phi[146]*f->P[12][19] +
-            t->Phi[147]*f->P[13][19] + t->Phi[148]*f->P[14][19] + t->Phi[149]*f->P[15][19] +
-            t->Phi[150]*f->P[18][19] + t->Phi[151]*f->P[19][19] + t->Phi[152]*f->P[20][19] +
-            t->Phi[153]*f->P[21][19] + t->Phi[154]*f->P[22][19] + t->Phi[155]*f->P[23][19] +
-            t->Phi[156]*f->P[24][19] + t->Phi[157]*f->P[25][19] + t->Phi[158]*f->P[26][19] +
-            t->Phi[159]*f->P[27][19] + t->Phi[160]*f->P[28][19] + t->Phi[161]*f->P[29][19];
-    w->M[20] = t->Phi[135]*f->P[0][20] + t->Phi[136]*f->P[1][20] + t->Phi[137]*f->P[2][20] +
-            t->Phi[138]*f->P[3][20] + t->Phi[139]*f->P[4][20] + t->Phi[140]*f->P[5][20] +
-            t->Phi[141]*f->P[7][20] + t->Phi[142]*f->P[8][20] + t->Phi[143]*f->P[9][20] +
-            t->Phi[144]*f->P[10][20] + t->Phi[145]*f->P[11][20] + t->Phi[146]*f->P[12][20] +
-            t->Phi[147]*f->P[13][20] + t->Phi[148]*f->P[14][20] + t->Phi[149]*f->P[15][20] +
-            t->Phi[150]*f->P[18][20] + t->Phi[151]*f->P[19][20] + t->Phi[152]*f->P[20][20] +
-            t->Phi[153]*f->P[21][20] + t->Phi[154]*f->P[22][20] + t->Phi[155]*f->P[23][20] +
-            t->Phi[156]*f->P[24][20] + t->Phi[157]*f->P[25][20] + t->Phi[158]*f->P[26][20] +
-            t->Phi[159]*f->P[27][20] + t->Phi[160]*f->P[28][20] + t->Phi[161]*f->P[29][20];
-    w->M[21] = t->Phi[135]*f->P[0][21] + t->Phi[136]*f->P[1][21] + t->Phi[137]*f->P[2][21] +
-            t->Phi[138]*f->P[3][21] + t->Phi[139]*f->P[4][21] + t->Phi[140]*f->P[5][21] +
-            t->Phi[141]*f->P[7][21] + t->Phi[142]*f->P[8][21] + t->Phi[143]*f->P[9][21] +
-            t->Phi[144]*f->P[10][21] + t->Phi[145]*f->P[11][21] + t->Phi[146]*f->P[12][21] +
-            t->Phi[147]*f->P[13][21] + t->Phi[148]*f->P[14][21] + t->Phi[149]*f->P[15][21] +
-            t->Phi[150]*f->P[18][21] + t->Phi[151]*f->P[19][21] + t->Phi[152]*f->P[20][21] +
-            t->Phi[153]*f->P[21][21] + t->Phi[154]*f->P[22][21] + t->Phi[155]*f->P[23][21] +
-            t->Phi[156]*f->P[24][21] + t->Phi[157]*f->P[25][21] + t->Phi[158]*f->P[26][21] +
-            t->Phi[159]*f->P[27][21] + t->Phi[160]*f->P[28][21] + t->Phi[161]*f->P[29][21];
-    w->M[22] = t->Phi[135]*f->P[0][22] + t->Phi[136]*f->P[1][22] + t->Phi[137]*f->P[2][22] +
-            t->Phi[138]*f->P[3][22] + t->Phi[139]*f->P[4][22] + t->Phi[140]*f->P[5][22] +
-            t->Phi[141]*f->P[7][22] + t->Phi[142]*f->P[8][22] + t->Phi[143]*f->P[9][22] +
-            t->Phi[144]*f->P[10][22] + t->Phi[145]*f->P[11][22] + t->Phi[146]*f->P[12][22] +
-            t->Phi[147]*f->P[13][22] + t->Phi[148]*f->P[14][22] + t->Phi[149]*f->P[15][22] +
-            t->Phi[150]*f->P[18][22] + t->Phi[151]*f->P[19][22] + t->Phi[152]*f->P[20][22] +
-            t->Phi[153]*f->P[21][22] + t->Phi[154]*f->P[22][22] + t->Phi[155]*f->P[23][22] +
-            t->Phi[156]*f->P[24][22] + t->Phi[157]*f->P[25][22] + t->Phi[158]*f->P[26][22] +
-            t->Phi[159]*f->P[27][22] + t->Phi[160]*f->P[28][22] + t->Phi[161]*f->P[29][22];
-    w->M[23] = t->Phi[135]*f->P[0][23] + t->Phi[136]*f->P[1][23] + t->Phi[137]*f->P[2][23] +
-            t->Phi[138]*f->P[3][23] + t->Phi[139]*f->P[4][23] + t->Phi[140]*f->P[5][23] +
-            t->Phi[141]*f->P[7][23] + t->Phi[142]*f->P[8][23] + t->Phi[143]*f->P[9][23] +
-            t->Phi[144]*f->P[10][23] + t->Phi[145]*f->P[11][23] + t->Phi[146]*f->P[12][23] +
-            t->Phi[147]*f->P[13][23] + t->Phi[148]*f->P[14][23] + t->Phi[149]*f->P[15][23] +
-            t->Phi[150]*f->P[18][23] + t->Phi[151]*f->P[19][23] + t->Phi[152]*f->P[20][23] +
-            t->Phi[153]*f->P[21][23] + t->Phi[154]*f->P[22][23] + t->Phi[155]*f->P[23][23] +
-            t->Phi[156]*f->P[24][23] + t->Phi[157]*f->P[25][23] + t->Phi[158]*f->P[26][23] +
-            t->Phi[159]*f->P[27][23] + t->Phi[160]*f->P[28][23] + t->Phi[161]*f->P[29][23];
-    w->M[24] = t->Phi[135]*f->P[0][24] + t->Phi[136]*f->P[1][24] + t->Phi[137]*f->P[2][24] +
-            t->Phi[138]*f->P[3][24] + t->Phi[139]*f->P[4][24] + t->Phi[140]*f->P[5][24] +
-            t->Phi[141]*f->P[7][24] + t->Phi[142]*f->P[8][24] + t->Phi[143]*f->P[9][24] +
-            t->Phi[144]*f->P[10][24] + t->Phi[145]*f->P[11][24] + t->Phi[146]*f->P[12][24] +
-            t->Phi[147]*f->P[13][24] + t->Phi[148]*f->P[14][24] + t->Phi[149]*f->P[15][24] +
-            t->Phi[150]*f->P[18][24] + t->Phi[151]*f->P[19][24] + t->Phi[152]*f->P[20][24] +
-            t->Phi[153]*f->P[21][24] + t->Phi[154]*f->P[22][24] + t->Phi[155]*f->P[23][24] +
-            t->Phi[156]*f->P[24][24] + t->Phi[157]*f->P[25][24] + t->Phi[158]*f->P[26][24] +
-            t->Phi[159]*f->P[27][24] + t->Phi[160]*f->P[28][24] + t->Phi[161]*f->P[29][24];
-    w->M[25] = t->Phi[135]*f->P[0][25] + t->Phi[136]*f->P[1][25] + t->Phi[137]*f->P[2][25] +
-            t->Phi[138]*f->P[3][25] + t->Phi[139]*f->P[4][25] + t->Phi[140]*f->P[5][25] +
-            t->Phi[141]*f->P[7][25] + t->Phi[142]*f->P[8][25] + t->Phi[143]*f->P[9][25] +
-            t->Phi[144]*f->P[10][25] + t->Phi[145]*f->P[11][25] + t->Phi[146]*f->P[12][25] +
-            t->Phi[147]*f->P[13][25] + t->Phi[148]*f->P[14][25] + t->Phi[149]*f->P[15][25] +
-            t->Phi[150]*f->P[18][25] + t->Phi[151]*f->P[19][25] + t->Phi[152]*f->P[20][25] +
-            t->Phi[153]*f->P[21][25] + t->Phi[154]*f->P[22][25] + t->Phi[155]*f->P[23][25] +
-            t->Phi[156]*f->P[24][25] + t->Phi[157]*f->P[25][25] + t->Phi[158]*f->P[26][25] +
-            t->Phi[159]*f->P[27][25] + t->Phi[160]*f->P[28][25] + t->Phi[161]*f->P[29][25];
-    w->M[26] = t->Phi[135]*f->P[0][26] + t->Phi[136]*f->P[1][26] + t->Phi[137]*f->P[2][26] +
-            t->Phi[138]*f->P[3][26] + t->Phi[139]*f->P[4][26] + t->Phi[140]*f->P[5][26] +
-            t->Phi[141]*f->P[7][26] + t->Phi[142]*f->P[8][26] + t->Phi[143]*f->P[9][26] +
-            t->Phi[144]*f->P[10][26] + t->Phi[145]*f->P[11][26] + t->Phi[146]*f->P[12][26] +
-            t->Phi[147]*f->P[13][26] + t->Phi[148]*f->P[14][26] + t->Phi[149]*f->P[15][26] +
-            t->Phi[150]*f->P[18][26] + t->Phi[151]*f->P[19][26] + t->Phi[152]*f->P[20][26] +
-            t->Phi[153]*f->P[21][26] + t->Phi[154]*f->P[22][26] + t->Phi[155]*f->P[23][26] +
-            t->Phi[156]*f->P[24][26] + t->Phi[157]*f->P[25][26] + t->Phi[158]*f->P[26][26] +
-            t->Phi[159]*f->P[27][26] + t->Phi[160]*f->P[28][26] + t->Phi[161]*f->P[29][26];
-    w->M[27] = t->Phi[135]*f->P[0][27] + t->Phi[136]*f->P[1][27] + t->Phi[137]*f->P[2][27] +
-            t->Phi[138]*f->P[3][27] + t->Phi[139]*f->P[4][27] + t->Phi[140]*f->P[5][27] +
-            t->Phi[141]*f->P[7][27] + t->Phi[142]*f->P[8][27] + t->Phi[143]*f->P[9][27] +
-            t->Phi[144]*f->P[10][27] + t->Phi[145]*f->P[11][27] + t->Phi[146]*f->P[12][27] +
-            t->Phi[147]*f->P[13][27] + t->Phi[148]*f->P[14][27] + t->Phi[149]*f->P[15][27] +
-            t->Phi[150]*f->P[18][27] + t->Phi[151]*f->P[19][27] + t->Phi[152]*f->P[20][27] +
-            t->Phi[153]*f->P[21][27] + t->Phi[154]*f->P[22][27] + t->Phi[155]*f->P[23][27] +
-            t->Phi[156]*f->P[24][27] + t->Phi[157]*f->P[25][27] + t->Phi[158]*f->P[26][27] +
-            t->Phi[159]*f->P[27][27] + t->Phi[160]*f->P[28][27] + t->Phi[161]*f->P[29][27];
-    w->M[28] = t->Phi[135]*f->P[0][28] + t->Phi[136]*f->P[1][28] + t->Phi[137]*f->P[2][28] +
-            t->Phi[138]*f->P[3][28] + t->Phi[139]*f->P[4][28] + t->Phi[140]*f->P[5][28] +
-            t->Phi[141]*f->P[7][28] + t->Phi[142]*f->P[8][28] + t->Phi[143]*f->P[9][28] +
-            t->Phi[144]*f->P[10][28] + t->Phi[145]*f->P[11][28] + t->Phi[146]*f->P[12][28] +
-            t->Phi[147]*f->P[13][28] + t->Phi[148]*f->P[14][28] + t->Phi[149]*f->P[15][28] +
-            t->Phi[150]*f->P[18][28] + t->Phi[151]*f->P[19][28] + t->Phi[152]*f->P[20][28] +
-            t->Phi[153]*f->P[21][28] + t->Phi[154]*f->P[22][28] + t->Phi[155]*f->P[23][28] +
-            t->Phi[156]*f->P[24][28] + t->Phi[157]*f->P[25][28] + t->Phi[158]*f->P[26][28] +
-            t->Phi[159]*f->P[27][28] + t->Phi[160]*f->P[28][28] + t->Phi[161]*f->P[29][28];
-    w->M[29] = t->Phi[135]*f->P[0][29] + t->Phi[136]*f->P[1][29] + t->Phi[137]*f->P[2][29] +
-            t->Phi[138]*f->P[3][29] + t->Phi[139]*f->P[4][29] + t->Phi[140]*f->P[5][29] +
-            t->Phi[141]*f->P[7][29] + t->Phi[142]*f->P[8][29] + t->Phi[143]*f->P[9][29] +
-            t->Phi[144]*f->P[10][29] + t->Phi[145]*f->P[11][29] + t->Phi[146]*f->P[12][29] +
-            t->Phi[147]*f->P[13][29] + t->Phi[148]*f->P[14][29] + t->Phi[149]*f->P[15][29] +
-            t->Phi[150]*f->P[18][29] + t->Phi[151]*f->P[19][29] + t->Phi[152]*f->P[20][29] +
-            t->Phi[153]*f->P[21][29] + t->Phi[154]*f->P[22][29] + t->Phi[155]*f->P[23][29] +
-            t->Phi[156]*f->P[24][29] + t->Phi[157]*f->P[25][29] + t->Phi[158]*f->P[26][29] +
-            t->Phi[159]*f->P[27][29] + t->Phi[160]*f->P[28][29] + t->Phi[161]*f->P[29][29];
-    w->M[30] = t->Phi[135]*f->P[0][30] + t->Phi[136]*f->P[1][30] + t->Phi[137]*f->P[2][30] +
-            t->Phi[138]*f->P[3][30] + t->Phi[139]*f->P[4][30] + t->Phi[140]*f->P[5][30] +
-            t->Phi[141]*f->P[7][30] + t->Phi[142]*f->P[8][30] + t->Phi[143]*f->P[9][30] +
-            t->Phi[144]*f->P[10][30] + t->Phi[145]*f->P[11][30] + t->Phi[146]*f->P[12][30] +
-            t->Phi[147]*f->P[13][30] + t->Phi[148]*f->P[14][30] + t->Phi[149]*f->P[15][30] +
-            t->Phi[150]*f->P[18][30] + t->Phi[151]*f->P[19][30] + t->Phi[152]*f->P[20][30] +
-            t->Phi[153]*f->P[21][30] + t->Phi[154]*f->P[22][30] + t->Phi[155]*f->P[23][30] +
-            t->Phi[156]*f->P[24][30] + t->Phi[157]*f->P[25][30] + t->Phi[158]*f->P[26][30] +
-            t->Phi[159]*f->P[27][30] + t->Phi[160]*f->P[28][30] + t->Phi[161]*f->P[29][30];
-    w->M[31] = t->Phi[135]*f->P[0][31] + t->Phi[136]*f->P[1][31] + t->Phi[137]*f->P[2][31] +
-            t->Phi[138]*f->P[3][31] + t->Phi[139]*f->P[4][31] + t->Phi[140]*f->P[5][31] +
-            t->Phi[141]*f->P[7][31] + t->Phi[142]*f->P[8][31] + t->Phi[143]*f->P[9][31] +
-            t->Phi[144]*f->P[10][31] + t->Phi[145]*f->P[11][31] + t->Phi[146]*f->P[12][31] +
-            t->Phi[147]*f->P[13][31] + t->Phi[148]*f->P[14][31] + t->Phi[149]*f->P[15][31] +
-            t->Phi[150]*f->P[18][31] + t->Phi[151]*f->P[19][31] + t->Phi[152]*f->P[20][31] +
-            t->Phi[153]*f->P[21][31] + t->Phi[154]*f->P[22][31] + t->Phi[155]*f->P[23][31] +
-            t->Phi[156]*f->P[24][31] + t->Phi[157]*f->P[25][31] + t->Phi[158]*f->P[26][31] +
-            t->Phi[159]*f->P[27][31] + t->Phi[160]*f->P[28][31] + t->Phi[161]*f->P[29][31];
+    int c;
+    lane_pair b[27];
+    b[0] = lane_pair_of(t->Phi[135], t->Phi[135]);
+    b[1] = lane_pair_of(t->Phi[136], t->Phi[136]);
+    b[2] = lane_pair_of(t->Phi[137], t->Phi[137]);
+    b[3] = lane_pair_of(t->Phi[138], t->Phi[138]);
+    b[4] = lane_pair_of(t->Phi[139], t->Phi[139]);
+    b[5] = lane_pair_of(t->Phi[140], t->Phi[140]);
+    b[6] = lane_pair_of(t->Phi[141], t->Phi[141]);
+    b[7] = lane_pair_of(t->Phi[142], t->Phi[142]);
+    b[8] = lane_pair_of(t->Phi[143], t->Phi[143]);
+    b[9] = lane_pair_of(t->Phi[144], t->Phi[144]);
+    b[10] = lane_pair_of(t->Phi[145], t->Phi[145]);
+    b[11] = lane_pair_of(t->Phi[146], t->Phi[146]);
+    b[12] = lane_pair_of(t->Phi[147], t->Phi[147]);
+    b[13] = lane_pair_of(t->Phi[148], t->Phi[148]);
+    b[14] = lane_pair_of(t->Phi[149], t->Phi[149]);
+    b[15] = lane_pair_of(t->Phi[150], t->Phi[150]);
+    b[16] = lane_pair_of(t->Phi[151], t->Phi[151]);
+    b[17] = lane_pair_of(t->Phi[152], t->Phi[152]);
+    b[18] = lane_pair_of(t->Phi[153], t->Phi[153]);
+    b[19] = lane_pair_of(t->Phi[154], t->Phi[154]);
+    b[20] = lane_pair_of(t->Phi[155], t->Phi[155]);
+    b[21] = lane_pair_of(t->Phi[156], t->Phi[156]);
+    b[22] = lane_pair_of(t->Phi[157], t->Phi[157]);
+    b[23] = lane_pair_of(t->Phi[158], t->Phi[158]);
+    b[24] = lane_pair_of(t->Phi[159], t->Phi[159]);
+    b[25] = lane_pair_of(t->Phi[160], t->Phi[160]);
+    b[26] = lane_pair_of(t->Phi[161], t->Phi[161]);
+    for (c = 0; c + 1 < 32; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[18][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[19][c]));
+        acc = lane_pair_add_product(acc, b[17], lane_pair_load(&f->P[20][c]));
+        acc = lane_pair_add_product(acc, b[18], lane_pair_load(&f->P[21][c]));
+        acc = lane_pair_add_product(acc, b[19], lane_pair_load(&f->P[22][c]));
+        acc = lane_pair_add_product(acc, b[20], lane_pair_load(&f->P[23][c]));
+        acc = lane_pair_add_product(acc, b[21], lane_pair_load(&f->P[24][c]));
+        acc = lane_pair_add_product(acc, b[22], lane_pair_load(&f->P[25][c]));
+        acc = lane_pair_add_product(acc, b[23], lane_pair_load(&f->P[26][c]));
+        acc = lane_pair_add_product(acc, b[24], lane_pair_load(&f->P[27][c]));
+        acc = lane_pair_add_product(acc, b[25], lane_pair_load(&f->P[28][c]));
+        acc = lane_pair_add_product(acc, b[26], lane_pair_load(&f->P[29][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -6078,326 +5270,67 @@ NED_DOPPLER32_AUGMENTED_BLOCK void phi_times_p_row_6(const ned_doppler32_augment
         f, const ned_doppler32_augmented_transition *restrict t,
         ned_doppler32_augmented_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[162]*f->P[0][0] + t->Phi[163]*f->P[1][0] + t->Phi[164]*f->P[2][0] +
-            t->Phi[165]*f->P[3][0] + t->Phi[166]*f->P[4][0] + t->Phi[167]*f->P[5][0] +
-            t->Phi[168]*f->P[6][0] + t->Phi[169]*f->P[7][0] + t->Phi[170]*f->P[8][0] +
-            t->Phi[171]*f->P[9][0] + t->Phi[172]*f->P[10][0] + t->Phi[173]*f->P[11][0] +
-            t->Phi[174]*f->P[12][0] + t->Phi[175]*f->P[13][0] + t->Phi[176]*f->P[14][0] +
-            t->Phi[177]*f->P[15][0] + t->Phi[178]*f->P[18][0] + t->Phi[179]*f->P[19][0] +
-            t->Phi[180]*f->P[20][0] + t->Phi[181]*f->P[21][0] + t->Phi[182]*f->P[22][0] +
-            t->Phi[183]*f->P[23][0] + t->Phi[184]*f->P[24][0] + t->Phi[185]*f->P[25][0] +
-            t->Phi[186]*f->P[26][0] + t->Phi[187]*f->P[27][0] + t->Phi[188]*f->P[28][0] +
-            t->Phi[189]*f->P[29][0];
-    w->M[1] = t->Phi[162]*f->P[0][1] + t->Phi[163]*f->P[1][1] + t->Phi[164]*f->P[2][1] +
-            t->Phi[165]*f->P[3][1] + t->Phi[166]*f->P[4][1] + t->Phi[167]*f->P[5][1] +
-            t->Phi[168]*f->P[6][1] + t->Phi[169]*f->P[7][1] + t->Phi[170]*f->P[8][1] +
-            t->Phi[171]*f->P[9][1] + t->Phi[172]*f->P[10][1] + t->Phi[173]*f->P[11][1] +
-            t->Phi[174]*f->P[12][1] + t->Phi[175]*f->P[13][1] + t->Phi[176]*f->P[14][1] +
-            t->Phi[177]*f->P[15][1] + t->Phi[178]*f->P[18][1] + t->Phi[179]*f->P[19][1] +
-            t->Phi[180]*f->P[20][1] + t->Phi[181]*f->P[21][1] + t->Phi[182]*f->P[22][1] +
-            t->Phi[183]*f->P[23][1] + t->Phi[184]*f->P[24][1] + t->Phi[185]*f->P[25][1] +
-            t->Phi[186]*f->P[26][1] + t->Phi[187]*f->P[27][1] + t->Phi[188]*f->P[28][1] +
-            t->Phi[189]*f->P[29][1];
-    w->M[2] = t->Phi[162]*f->P[0][2] + t->Phi[163]*f->P[1][2] + t->Phi[164]*f->P[2][2] +
-            t->Phi[165]*f->P[3][2] + t->Phi[166]*f->P[4][2] + t->Phi[167]*f->P[5][2] +
-            t->Phi[168]*f->P[6][2] + t->Phi[169]*f->P[7][2] + t->Phi[170]*f->P[8][2] +
-            t->Phi[171]*f->P[9][2] + t->Phi[172]*f->P[10][2] + t->Phi[173]*f->P[11][2] +
-            t->Phi[174]*f->P[12][2] + t->Phi[175]*f->P[13][2] + t->Phi[176]*f->P[14][2] +
-            t->Phi[177]*f->P[15][2] + t->Phi[178]*f->P[18][2] + t->Phi[179]*f->P[19][2] +
-            t->Phi[180]*f->P[20][2] + t->Phi[181]*f->P[21][2] + t->Phi[182]*f->P[22][2] +
-            t->Phi[183]*f->P[23][2] + t->Phi[184]*f->P[24][2] + t->Phi[185]*f->P[25][2] +
-            t->Phi[186]*f->P[26][2] + t->Phi[187]*f->P[27][2] + t->Phi[188]*f->P[28][2] +
-            t->Phi[189]*f->P[29][2];
-    w->M[3] = t->Phi[162]*f->P[0][3] + t->Phi[163]*f->P[1][3] + t->Phi[164]*f->P[2][3] +
-            t->Phi[165]*f->P[3][3] + t->Phi[166]*f->P[4][3] + t->Phi[167]*f->P[5][3] +
-            t->Phi[168]*f->P[6][3] + t->Phi[169]*f->P[7][3] + t->Phi[170]*f->P[8][3] +
-            t->Phi[171]*f->P[9][3] + t->Phi[172]*f->P[10][3] + t->Phi[173]*f->P[11][3] +
-            t->Phi[174]*f->P[12][3] + t->Phi[175]*f->P[13][3] + t->Phi[176]*f->P[14][3] +
-            t->Phi[177]*f->P[15][3] + t->Phi[178]*f->P[18][3] + t->Phi[179]*f->P[19][3] +
-            t->Phi[180]*f->P[20][3] + t->Phi[181]*f->P[21][3] + t->Phi[182]*f->P[22][3] +
-            t->Phi[183]*f->P[23][3] + t->Phi[184]*f->P[24][3] + t->Phi[185]*f->P[25][3] +
-            t->Phi[186]*f->P[26][3] + t->Phi[187]*f->P[27][3] + t->Phi[188]*f->P[28][3] +
-            t->Phi[189]*f->P[29][3];
-    w->M[4] = t->Phi[162]*f->P[0][4] + t->Phi[163]*f->P[1][4] + t->Phi[164]*f->P[2][4] +
-            t->Phi[165]*f->P[3][4] + t->Phi[166]*f->P[4][4] + t->Phi[167]*f->P[5][4] +
-            t->Phi[168]*f->P[6][4] + t->Phi[169]*f->P[7][4] + t->Phi[170]*f->P[8][4] +
-            t->Phi[171]*f->P[9][4] + t->Phi[172]*f->P[10][4] + t->Phi[173]*f->P[11][4] +
-            t->Phi[174]*f->P[12][4] + t->Phi[175]*f->P[13][4] + t->Phi[176]*f->P[14][4] +
-            t->Phi[177]*f->P[15][4] + t->Phi[178]*f->P[18][4] + t->Phi[179]*f->P[19][4] +
-            t->Phi[180]*f->P[20][4] + t->Phi[181]*f->P[21][4] + t->Phi[182]*f->P[22][4] +
-            t->Phi[183]*f->P[23][4] + t->Phi[184]*f->P[24][4] + t->Phi[185]*f->P[25][4] +
-            t->Phi[186]*f->P[26][4] + t->Phi[187]*f->P[27][4] + t->Phi[188]*f->P[28][4] +
-            t->Phi[189]*f->P[29][4];
-    w->M[5] = t->Phi[162]*f->P[0][5] + t->Phi[163]*f->P[1][5] + t->Phi[164]*f->P[2][5] +
-            t->Phi[165]*f->P[3][5] + t->Phi[166]*f->P[4][5] + t->Phi[167]*f->P[5][5] +
-            t->Phi[168]*f->P[6][5] + t->Phi[169]*f->P[7][5] + t->Phi[170]*f->P[8][5] +
-            t->Phi[171]*f->P[9][5] + t->Phi[172]*f->P[10][5] + t->Phi[173]*f->P[11][5] +
-            t->Phi[174]*f->P[12][5] + t->Phi[175]*f->P[13][5] + t->Phi[176]*f->P[14][5] +
-            t->Phi[177]*f->P[15][5] + t->Phi[178]*f->P[18][5] + t->Phi[179]*f->P[19][5] +
-            t->Phi[180]*f->P[20][5] + t->Phi[181]*f->P[21][5] + t->Phi[182]*f->P[22][5] +
-            t->Phi[183]*f->P[23][5] + t->Phi[184]*f->P[24][5] + t->Phi[185]*f->P[25][5] +
-            t->Phi[186]*f->P[26][5] + t->Phi[187]*f->P[27][5] + t->Phi[188]*f->P[28][5] +
-            t->Phi[189]*f->P[29][5];
-    w->M[6] = t->Phi[162]*f->P[0][6] + t->Phi[163]*f->P[1][6] + t->Phi[164]*f->P[2][6] +
-            t->Phi[165]*f->P[3][6] + t->Phi[166]*f->P[4][6] + t->Phi[167]*f->P[5][6] +
-            t->Phi[168]*f->P[6][6] + t->Phi[169]*f->P[7][6] + t->Phi[170]*f->P[8][6] +
-            t->Phi[171]*f->P[9][6] + t->Phi[172]*f->P[10][6] + t->Phi[173]*f->P[11][6] +
-            t->Phi[174]*f->P[12][6] + t->Phi[175]*f->P[13][6] + t->Phi[176]*f->P[14][6] +
-            t->Phi[177]*f->P[15][6] + t->Phi[178]*f->P[18][6] + t->Phi[179]*f->P[19][6] +
-            t->Phi[180]*f->P[20][6] + t->Phi[181]*f->P[21][6] + t->Phi[182]*f->P[22][6] +
-            t->Phi[183]*f->P[23][6] + t->Phi[184]*f->P[24][6] + t->Phi[185]*f->P[25][6] +
-            t->Phi[186]*f->P[26][6] + t->Phi[187]*f->P[27][6] + t->Phi[188]*f->P[28][6] +
-            t->Phi[189]*f->P[29][6];
-    w->M[7] = t->Phi[162]*f->P[0][7] + t->Phi[163]*f->P[1][7] + t->Phi[164]*f->P[2][7] +
-            t->Phi[165]*f->P[3][7] + t->Phi[166]*f->P[4][7] + t->Phi[167]*f->P[5][7] +
-            t->Phi[168]*f->P[6][7] + t->Phi[169]*f->P[7][7] + t->Phi[170]*f->P[8][7] +
-            t->Phi[171]*f->P[9][7] + t->Phi[172]*f->P[10][7] + t->Phi[173]*f->P[11][7] +
-            t->Phi[174]*f->P[12][7] + t->Phi[175]*f->P[13][7] + t->Phi[176]*f->P[14][7] +
-            t->Phi[177]*f->P[15][7] + t->Phi[178]*f->P[18][7] + t->Phi[179]*f->P[19][7] +
-            t->Phi[180]*f->P[20][7] + t->Phi[181]*f->P[21][7] + t->Phi[182]*f->P[22][7] +
-            t->Phi[183]*f->P[23][7] + t->Phi[184]*f->P[24][7] + t->Phi[185]*f->P[25][7] +
-            t->Phi[186]*f->P[26][7] + t->Phi[187]*f->P[27][7] + t->Phi[188]*f->P[28][7] +
-            t->Phi[189]*f->P[29][7];
-    w->M[8] = t->Phi[162]*f->P[0][8] + t->Phi[163]*f->P[1][8] + t->Phi[164]*f->P[2][8] +
-            t->Phi[165]*f->P[3][8] + t->Phi[166]*f->P[4][8] + t->Phi[167]*f->P[5][8] +
-            t->Phi[168]*f->P[6][8] + t->Phi[169]*f->P[7][8] + t->Phi[170]*f->P[8][8] +
-            t->Phi[171]*f->P[9][8] + t->Phi[172]*f->P[10][8] + t->Phi[173]*f->P[11][8] +
-            t->Phi[174]*f->P[12][8] + t->Phi[175]*f->P[13][8] + t->Phi[176]*f->P[14][8] +
-            t->Phi[177]*f->P[15][8] + t->Phi[178]*f->P[18][8] + t->Phi[179]*f->P[19][8] +
-            t->Phi[180]*f->P[20][8] + t->Phi[181]*f->P[21][8] + t->Phi[182]*f->P[22][8] +
-            t->Phi[183]*f->P[23][8] + t->Phi[184]*f->P[24][8] + t->Phi[185]*f->P[25][8] +
-            t->Phi[186]*f->P[26][8] + t->Phi[187]*f->P[27][8] + t->Phi[188]*f->P[28][8] +
-            t->Phi[189]*f->P[29][8];
-    w->M[9] = t->Phi[162]*f->P[0][9] + t->Phi[163]*f->P[1][9] + t->Phi[164]*f->P[2][9] +
-            t->Phi[165]*f->P[3][9] + t->Phi[166]*f->P[4][9] + t->Phi[167]*f->P[5][9] +
-            t->Phi[168]*f->P[6][9] + t->Phi[169]*f->P[7][9] + t->Phi[170]*f->P[8][9] +
-            t->Phi[171]*f->P[9][9] + t->Phi[172]*f->P[10][9] + t->Phi[173]*f->P[11][9] +
-            t->Phi[174]*f->P[12][9] + t->Phi[175]*f->P[13][9] + t->Phi[176]*f->P[14][9] +
-            t->Phi[177]*f->P[15][9] + t->Phi[178]*f->P[18][9] + t->Phi[179]*f->P[19][9] +
-            t->Phi[180]*f->P[20][9] + t->Phi[181]*f->P[21][9] + t->Phi[182]*f->P[22][9] +
-            t->Phi[183]*f->P[23][9] + t->Phi[184]*f->P[24][9] + t->Phi[185]*f->P[25][9] +
-            t->Phi[186]*f->P[26][9] + t->Phi[187]*f->P[27][9] + t->Phi[188]*f->P[28][9] +
-            t->Phi[189]*f->P[29][9];
-    w->M[10] = t->Phi[162]*f->P[0][10] + t->Phi[163]*f->P[1][10] + t->Phi[164]*f->P[2][10] +
-            t->Phi[165]*f->P[3][10] + t->Phi[166]*f->P[4][10] + t->Phi[167]*f->P[5][10] +
-            t->Phi[168]*f->P[6][10] + t->Phi[169]*f->P[7][10] + t->Phi[170]*f->P[8][10] +
-            t->Phi[171]*f->P[9][10] + t->Phi[172]*f->P[10][10] + t->Phi[173]*f->P[11][10] +
-            t->Phi[174]*f->P[12][10] + t->Phi[175]*f->P[13][10] + t->Phi[176]*f->P[14][10] +
-            t->Phi[177]*f->P[15][10] + t->Phi[178]*f->P[18][10] + t->Phi[179]*f->P[19][10] +
-            t->Phi[180]*f->P[20][10] + t->Phi[181]*f->P[21][10] + t->Phi[182]*f->P[22][10] +
-            t->Phi[183]*f->P[23][10] + t->Phi[184]*f->P[24][10] + t->Phi[185]*f->P[25][10] +
-            t->Phi[186]*f->P[26][10] + t->Phi[187]*f->P[27][10] + t->Phi[188]*f->P[28][10] +
-            t->Phi[189]*f->P[29][10];
-    w->M[11] = t->Phi[162]*f->P[0][11] + t->Phi[163]*f->P[1][11] + t->Phi[164]*f->P[2][11] +
-            t->Phi[165]*f->P[3][11] + t->Phi[166]*f->P[4][11] + t->Phi[167]*f->P[5][11] +
-            t->Phi[168]*f->P[6][11] + t->Phi[169]*f->P[7][11] + t->Phi[170]*f->P[8][11] +
-            t->Phi[171]*f->P[9][11] + t->Phi[172]*f->P[10][11] + t->Phi[173]*f->P[11][11] +
-            t->Phi[174]*f->P[12][11] + t->Phi[175]*f->P[13][11] + t->Phi[176]*f->P[14][11] +
-            t->Phi[177]*f->P[15][11] + t->Phi[178]*f->P[18][11] + t->Phi[179]*f->P[19][11] +
-            t->Phi[180]*f->P[20][11] + t->Phi[181]*f->P[21][11] + t->Phi[182]*f->P[22][11] +
-            t->Phi[183]*f->P[23][11] + t->Phi[184]*f->P[24][11] + t->Phi[185]*f->P[25][11] +
-            t->Phi[186]*f->P[26][11] + t->Phi[187]*f->P[27][11] + t->Phi[188]*f->P[28][11] +
-            t->Phi[189]*f->P[29][11];
-    w->M[12] = t->Phi[162]*f->P[0][12] + t->Phi[163]*f->P[1][12] + t->Phi[164]*f->P[2][12] +
-            t->Phi[165]*f->P[3][12] + t->Phi[166]*f->P[4][12] + t->Phi[167]*f->P[5][12] +
-            t->Phi[168]*f->P[6][12] + t->Phi[169]*f->P[7][12] + t->Phi[170]*f->P[8][12] +
-            t->Phi[171]*f->P[9][12] + t->Phi[172]*f->P[10][12] + t->Phi[173]*f->P[11][12] +
-            t->Phi[174]*f->P[12][12] + t->Phi[175]*f->P[13][12] + t->Phi[176]*f->P[14][12] +
-            t->Phi[177]*f->P[15][12] + t->Phi[178]*f->P[18][12] + t->Phi[179]*f->P[19][12] +
-            t->Phi[180]*f->P[20][12] + t->Phi[181]*f->P[21][12] + t->Phi[182]*f->P[22][12] +
-            t->Phi[183]*f->P[23][12] + t->Phi[184]*f->P[24][12] + t->Phi[185]*f->P[25][12] +
-            t->Phi[186]*f->P[26][12] + t->Phi[187]*f->P[27][12] + t->Phi[188]*f->P[28][12] +
-            t->Phi[189]*f->P[29][12];
-    w->M[13] = t->Phi[162]*f->P[0][13] + t->Phi[163]*f->P[1][13] + t->Phi[164]*f->P[2][13] +
-            t->Phi[165]*f->P[3][13] + t->Phi[166]*f->P[4][13] + t->Phi[167]*f->P[5][13] +
-            t->Phi[168]*f->P[6][13] + t->Phi[169]*f->P[7][13] + t->Phi[170]*f->P[8][13] +
-            t->Phi[171]*f->P[9][13] + t->Phi[172]*f->P[10][13] + t->Phi[173]*f->P[11][13] +
-            t->Phi[174]*f->P[12][13] + t->Phi[175]*f->P[13][13] + t->Phi[176]*f->P[14][13] +
-            t->Phi[177]*f->P[15][13] + t->Phi[178]*f->P[18][13] + t->Phi[179]*f->P[19][13] +
-            t->Phi[180]*f->P[20][13] + t->Phi[181]*f->P[21][13] + t->Phi[182]*f->P[22][13] +
-            t->Phi[183]*f->P[23][13] + t->Phi[184]*f->P[24][13] + t->Phi[185]*f->P[25][13] +
-            t->Phi[186]*f->P[26][13] + t->Phi[187]*f->P[27][13] + t->Phi[188]*f->P[28][13] +
-            t->Phi[189]*f->P[29][13];
-    w->M[14] = t->Phi[162]*f->P[0][14] + t->Phi[163]*f->P[1][14] + t->Phi[164]*f->P[2][14] +
-            t->Phi[165]*f->P[3][14] + t->Phi[166]*f->P[4][14] + t->Phi[167]*f->P[5][14] +
-            t->Phi[168]*f->P[6][14] + t->Phi[169]*f->P[7][14] + t->Phi[170]*f->P[8][14] +
-            t->Phi[171]*f->P[9][14] + t->Phi[172]*f->P[10][14] + t->Phi[173]*f->P[11][14] +
-            t->Phi[174]*f->P[12][14] + t->Phi[175]*f->P[13][14] + t->Phi[176]*f->P[14][14] +
-            t->Phi[177]*f->P[15][14] + t->Phi[178]*f->P[18][14] + t->Phi[179]*f->P[19][14] +
-            t->Phi[180]*f->P[20][14] + t->Phi[181]*f->P[21][14] + t->Phi[182]*f->P[22][14] +
-            t->Phi[183]*f->P[23][14] + t->Phi[184]*f->P[24][14] + t->Phi[185]*f->P[25][14] +
-            t->Phi[186]*f->P[26][14] + t->Phi[187]*f->P[27][14] + t->Phi[188]*f->P[28][14] +
-            t->Phi[189]*f->P[29][14];
-    w->M[15] = t->Phi[162]*f->P[0][15] + t->Phi[163]*f->P[1][15] + t->Phi[164]*f->P[2][15] +
-            t->Phi[165]*f->P[3][15] + t->Phi[166]*f->P[4][15] + t->Phi[167]*f->P[5][15] +
-            t->Phi[168]*f->P[6][15] + t->Phi[169]*f->P[7][15] + t->Phi[170]*f->P[8][15] +
-            t->Phi[171]*f->P[9][15] + t->Phi[172]*f->P[10][15] + t->Phi[173]*f->P[11][15] +
-            t->Phi[174]*f->P[12][15] + t->Phi[175]*f->P[13][15] + t->Phi[176]*f->P[14][15] +
-            t->Phi[177]*f->P[15][15] + t->Phi[178]*f->P[18][15] + t->Phi[179]*f->P[19][15] +
-            t->Phi[180]*f->P[20][15] + t->Phi[181]*f->P[21][15] + t->Phi[182]*f->P[22][15] +
-            t->Phi[183]*f->P[23][15] + t->Phi[184]*f->P[24][15] + t->Phi[185]*f->P[25][15] +
-            t->Phi[186]*f->P[26][15] + t->Phi[187]*f->P[27][15] + t->Phi[188]*f->P[28][15] +
-            t->Phi[189]*f->P[29][15];
-    w->M[16] = t->Phi[162]*f->P[0][16] + t->Phi[163]*f->P[1][16] + t->Phi[164]*f->P[2][16] +
-            t->Phi[165]*f->P[3][16] + t->Phi[166]*f->P[4][16] + t->Phi[167]*f->P[5][16] +
-            t->Phi[168]*f->P[6][16] + t->Phi[169]*f->P[7][16] + t->Phi[170]*f->P[8][16] +
-            t->Phi[171]*f->P[9][16] + t->Phi[172]*f->P[10][16] + t->Phi[173]*f->P[11][16] +
-            t->Phi[174]*f->P[12][16] + t->Phi[175]*f->P[13][16] + t->Phi[176]*f->P[14][16] +
-            t->Phi[177]*f->P[15][16] + t->Phi[178]*f->P[18][16] + t->Phi[179]*f->P[19][16] +
-            t->Phi[180]*f->P[20][16] + t->Phi[181]*f->P[21][16] + t->Phi[182]*f->P[22][16] +
-            t->Phi[183]*f->P[23][16] + t->Phi[184]*f->P[24][16] + t->Phi[185]*f->P[25][16] +
-            t->Phi[186]*f->P[26][16] + t->Phi[187]*f->P[27][16] + t->Phi[188]*f->P[28][16] +
-            t->Phi[189]*f->P[29][16];
-    w->M[17] = t->Phi[162]*f->P[0][17] + t->Phi[163]*f->P[1][17] + t->Phi[164]*f->P[2][17] +
-            t->Phi[165]*f->P[3][17] + t->Phi[166]*f->P[4][17] + t->Phi[167]*f->P[5][17] +
-            t->Phi[168]*f->P[6][17] + t->Phi[169]*f->P[7][17] + t->Phi[170]*f->P[8][17] +
-            t->Phi[171]*f->P[9][17] + t->Phi[172]*f->P[10][17] + t->Phi[173]*f->P[11][17] +
-            t->Phi[174]*f->P[12][17] + t->Phi[175]*f->P[13][17] + t->Phi[176]*f->P[14][17] +
-            t->Phi[177]*f->P[15][17] + t->Phi[178]*f->P[18][17] + t->Phi[179]*f->P[19][17] +
-            t->Phi[180]*f->P[20][17] + t->Phi[181]*f->P[21][17] + t->Phi[182]*f->P[22][17] +
-            t->Phi[183]*f->P[23][17] + t->Phi[184]*f->P[24][17] + t->Phi[185]*f->P[25][17] +
-            t->Phi[186]*f->P[26][17] + t->Phi[187]*f->P[27][17] + t->Phi[188]*f->P[28][17] +
-            t->Phi[189]*f->P[29][17];
-    w->M[18] = t->Phi[162]*f->P[0][18] + t->Phi[163]*f->P[1][18] + t->Phi[164]*f->P[2][18] +
-            t->Phi[165]*f->P[3][18] + t->Phi[166]*f->P[4][18] + t->Phi[167]*f->P[5][18] +
-            t->Phi[168]*f->P[6][18] + t->Phi[169]*f->P[7][18] + t->Phi[170]*f->P[8][18] +
-            t->Phi[171]*f->P[9][18] + t->Phi[172]*f->P[10][18] + t->Phi[173]*f->P[11][18] +
-            t->Phi[174]*f->P[12][18] + t->Phi[175]*f->P[13][18] + t->Phi[176]*f->P[14][18] +
-            t->Phi[177]*f->P[15][18] + t->Phi[178]*f->P[18][18] + t->Phi[179]*f->P[19][18] +
-            t->Phi[180]*f->P[20][18] + t->Phi[181]*f->P[21][18] + t->Phi[182]*f->P[22][18] +
-            t->Phi[183]*f->P[23][18] + t->Phi[184]*f->P[24][18] + t->Phi[185]*f->P[25][18] +
-            t->Phi[186]*f->P[26][18] + t->Phi[187]*f->P[27][18] + t->Phi[188]*f->P[28][18] +
-            t->Phi[189]*f->P[29][18];
-    w->M[19] = t->Phi[162]*f->P[0][19] + t->Phi[163]*f->P[1][19] + t->Phi[164]*f->P[2][19] +
-            t->Phi[165]*f->P[3][19] + t->Phi[166]*f->P[4][19] + t->Phi[167]*f->P[5][19] +
-            t->Phi[168]*f->P[6][19] + t->Phi[169]*f->P[7][19] + t->Phi[170]*f->P[8][19] +
-            t->Phi[171]*f->P[9][19] + t->Phi[172]*f->P[10][19] + t->Phi[173]*f->P[11][19] +
-            t->Phi[174]*f->P[12][19] + t->Phi[175]*f->P[13][19] + t->Phi[176]*f->P[14][19] +
-            t->Phi[177]*f->P[15][19] + t->Phi[178]*f->P[18][19] + t->Phi[179]*f->P[19][19] +
-            t->Phi[180]*f->P[20][19] + t->Phi[181]*f->P[21][19] + t->Phi[182]*f->P[22][19] +
-            t->Phi[183]*f->P[23][19] + t->Phi[184]*f->P[24][19] + t->Phi[185]*f->P[25][19] +
-            t->Phi[186]*f->P[26][19] + t->Phi[187]*f->P[27][19] + t->Phi[188]*f->P[28][19] +
-            t->Phi[189]*f->P[29][19];
-    w->M[20] = t->Phi[162]*f->P[0][20] + t->Phi[163]*f->P[1][20] + t->Phi[164]*f->P[2][20] +
-            t->Phi[165]*f->P[3][20] + t->Phi[166]*f->P[4][20] + t->Phi[167]*f->P[5][20] +
-            t->Phi[168]*f->P[6][20] + t->Phi[169]*f->P[7][20] + t->Phi[170]*f->P[8][20] +
-            t->Phi[171]*f->P[9][20] + t->Phi[172]*f->P[10][20] + t->Phi[173]*f->P[11][20] +
-            t->Phi[174]*f->P[12][20] + t->Phi[175]*f->P[13][20] + t->Phi[176]*f->P[14][20] +
-            t->Phi[177]*f->P[15][20] + t->Phi[178]*f->P[18][20] + t->Phi[179]*f->P[19][20] +
-            t->Phi[180]*f->P[20][20] + t->Phi[181]*f->P[21][20] + t->Phi[182]*f->P[22][20] +
-            t->Phi[183]*f->P[23][20] + t->Phi[184]*f->P[24][20] + t->Phi[185]*f->P[25][20] +
-            t->Phi[186]*f->P[26][20] + t->Phi[187]*f->P[27][20] + t->Phi[188]*f->P[28][20] +
-            t->Phi[189]*f->P[29][20];
-    w->M[21] = t->Phi[162]*f->P[0][21] + t->Phi[163]*f->P[1][21] + t->Phi[164]*f->P[2][21] +
-            t->Phi[165]*f->P[3][21] + t->Phi[166]*f->P[4][21] + t->Phi[167]*f->P[5][21] +
-            t->Phi[168]*f->P[6][21] + t->Phi[169]*f->P[7][21] + t->Phi[170]*f->P[8][21] +
-            t->Phi[171]*f->P[9][21] + t->Phi[172]*f->P[10][21] + t->Phi[173]*f->P[11][21] +
-            t->Phi[174]*f->P[12][21] + t->Phi[175]*f->P[13][21] + t->Phi[176]*f->P[14][21] +
-            t->Phi[177]*f->P[15][21] + t->Phi[178]*f->P[18][21] + t->Phi[179]*f->P[19][21] +
-            t->Phi[180]*f->P[20][21] + t->Phi[181]*f->P[21][21] + t->Phi[182]*f->P[22][21] +
-            t->Phi[183]*f->P[23][21] + t->Phi[184]*f->P[24][21] + t->Phi[185]*f->P[25][21] +
-            t->Phi[186]*f->P[26][21] + t->Phi[187]*f->P[27][21] + t->Phi[188]*f->P[28][21] +
-            t->Phi[189]*f->P[29][21];
-    w->M[22] = t->Phi[162]*f->P[0][22] + t->Phi[163]*f->P[1][22] + t->Phi[164]*f->P[2][22] +
-            t->Phi[165]*f->P[3][22] + t->Phi[166]*f->P[4][22] + t->Phi[167]*f->P[5][22] +
-            t->Phi[168]*f->P[6][22] + t->Phi[169]*f->P[7][22] + t->Phi[170]*f->P[8][22] +
-            t->Phi[171]*f->P[9][22] + t->Phi[172]*f->P[10][22] + t->Phi[173]*f->P[11][22] +
-            t->Phi[174]*f->P[12][22] + t->Phi[175]*f->P[13][22] + t->Phi[176]*f->P[14][22] +
-            t->Phi[177]*f->P[15][22] + t->Phi[178]*f->P[18][22] + t->Phi[179]*f->P[19][22] +
-            t->Phi[180]*f->P[20][22] + t->Phi[181]*f->P[21][22] + t->Phi[182]*f->P[22][22] +
-            t->Phi[183]*f->P[23][22] + t->Phi[184]*f->P[24][22] + t->Phi[185]*f->P[25][22] +
-            t->Phi[186]*f->P[26][22] + t->Phi[187]*f->P[27][22] + t->Phi[188]*f->P[28][22] +
-            t->Phi[189]*f->P[29][22];
-    w->M[23] = t->Phi[162]*f->P[0][23] + t->Phi[163]*f->P[1][23] + t->Phi[164]*f->P[2][23] +
-            t->Phi[165]*f->P[3][23] + t->Phi[166]*f->P[4][23] + t->Phi[167]*f->P[5][23] +
-            t->Phi[168]*f->P[6][23] + t->Phi[169]*f->P[7][23] + t->Phi[170]*f->P[8][23] +
-            t->Phi[171]*f->P[9][23] + t->Phi[172]*f->P[10][23] + t->Phi[173]*f->P[11][23] +
-            t->Phi[174]*f->P[12][23] + t->Phi[175]*f->P[13][23] + t->Phi[176]*f->P[14][23] +
-            t->Phi[177]*f->P[15][23] + t->Phi[178]*f->P[18][23] + t->Phi[179]*f->P[19][23] +
-            t->Phi[180]*f->P[20][23] + t->Phi[181]*f->P[21][23] + t->Phi[182]*f->P[22][23] +
-            t->Phi[183]*f->P[23][23] + t->Phi[184]*f->P[24][23] + t->Phi[185]*f->P[25][23] +
-            t->Phi[186]*f->P[26][23] + t->Phi[187]*f->P[27][23] + t->Phi[188]*f->P[28][23] +
-            t->Phi[189]*f->P[29][23];
-    w->M[24] = t->Phi[162]*f->P[0][24] + t->Phi[163]*f->P[1][24] + t->Phi[164]*f->P[2][24] +
-            t->Phi[165]*f->P[3][24] + t->Phi[166]*f->P[4][24] + t->Phi[167]*f->P[5][24] +
-            t->Phi[168]*f->P[6][24] + t->Phi[169]*f->P[7][24] + t->Phi[170]*f->P[8][24] +
-            t->Phi[171]*f->P[9][24] + t->Phi[172]*f->P[10][24] + t->Phi[173]*f->P[11][24] +
-            t->Phi[174]*f->P[12][24] + t->Phi[175]*f->P[13][24] + t->Phi[176]*f->P[14][24] +
-            t->Phi[177]*f->P[15][24] + t->Phi[178]*f->P[18][24] + t->Phi[179]*f->P[19][24] +
-            t->Phi[180]*f->P[20][24] + t->Phi[181]*f->P[21][24] + t->Phi[182]*f->P[22][24] +
-            t->Phi[183]*f->P[23][24] + t->Phi[184]*f->P[24][24] + t->Phi[185]*f->P[25][24] +
-            t->Phi[186]*f->P[26][24] + t->Phi[187]*f->P[27][24] + t->Phi[188]*f->P[28][24] +
-            t->Phi[189]*f->P[29][24];
-    w->M[25] = t->Phi[162]*f->P[0][25] + t->Phi[163]*f->P[1][25] + t->Phi[164]*f->P[2][25] +
-            t->Phi[165]*f->P[3][25] + t->Phi[166]*f->P[4][25] + t->Phi[167]*f->P[5][25] +
-            t->Phi[168]*f->P[6][25] + t->Phi[169]*f->P[7][25] + t->Phi[170]*f->P[8][25] +
-            t->Phi[171]*f->P[9][25] + t->Phi[172]*f->P[10][25] + t->Phi[173]*f->P[11][25] +
-            t->Phi[174]*f->P[12][25] + t->Phi[175]*f->P[13][25] + t->Phi[176]*f->P[14][25] +
-            t->Phi[177]*f->P[15][25] + t->Phi[178]*f->P[18][25] + t->Phi[179]*f->P[19][25] +
-            t->Phi[180]*f->P[20][25] + t->Phi[181]*f->P[21][25] + t->Phi[182]*f->P[22][25] +
-            t->Phi[183]*f->P[23][25] + t->Phi[184]*f->P[24][25] + t->Phi[185]*f->P[25][25] +
-            t->Phi[186]*f->P[26][25] + t->Phi[187]*f->P[27][25] + t->Phi[188]*f->P[28][25] +
-            t->Phi[189]*f->P[29][25];
-    w->M[26] = t->Phi[162]*f->P[0][26] + t->Phi[163]*f->P[1][26] + t->Phi[164]*f->P[2][26] +
-            t->Phi[165]*f->P[3][26] + t->Phi[166]*f->P[4][26] + t->Phi[167]*f->P[5][26] +
-            t->Phi[168]*f->P[6][26] + t->Phi[169]*f->P[7][26] + t->Phi[170]*f->P[8][26] +
-            t->Phi[171]*f->P[9][26] + t->Phi[172]*f->P[10][26] + t->Phi[173]*f->P[11][26] +
-            t->Phi[174]*f->P[12][26] + t->Phi[175]*f->P[13][26] + t->Phi[176]*f->P[14][26] +
-            t->Phi[177]*f->P[15][26] + t->Phi[178]*f->P[18][26] + t->Phi[179]*f->P[19][26] +
-            t->Phi[180]*f->P[20][26] + t->Phi[181]*f->P[21][26] + t->Phi[182]*f->P[22][26] +
-            t->Phi[183]*f->P[23][26] + t->Phi[184]*f->P[24][26] + t->Phi[185]*f->P[25][26] +
-            t->Phi[186]*f->P[26][26] + t->Phi[187]*f->P[27][26] + t->Phi[188]*f->P[28][26] +
-            t->Phi[189]*f->P[29][26];
-    w->M[27] = t->Phi[162]*f->P[0][27] + t->Phi[163]*f->P[1][27] + t->Phi[164]*f->P[2][27] +
-            t->Phi[165]*f->P[3][27] + t->Phi[166]*f->P[4][27] + t->Phi[167]*f->P[5][27] +
-            t->Phi[168]*f->P[6][27] + t->Phi[169]*f->P[7][27] + t->Phi[170]*f->P[8][27] +
-            t->Phi[171]*f->P[9][27] + t->Phi[172]*f->P[10][27] + t->Phi[173]*f->P[11][27] +
-            t->Phi[174]*f->P[12][27] + t->Phi[175]*f->P[13][27] + t->Phi[176]*f->P[14][27] +
-            t->Phi[177]*f->P[15][27] + t->Phi[178]*f->P[18][27] + t->Phi[179]*f->P[19][27] +
-            t->Phi[180]*f->P[20][27] + t->Phi[181]*f->P[21][27] + t->Phi[182]*f->P[22][27] +
-            t->Phi[183]*f->P[23][27] + t->Phi[184]*f->P[24][27] + t->Phi[185]*f->P[25][27] +
-            t->Phi[186]*f->P[26][27] + t->Phi[187]*f->P[27][27] + t->Phi[188]*f->P[28][27] +
-            t->Phi[189]*f->P[29][27];
-    w->M[28] = t->Phi[162]*f->P[0][28] + t->Phi[163]*f->P[1][28] + t->Phi[164]*f->P[2][28] +
-            t->Phi[165]*f->P[3][28] + t->Phi[166]*f->P[4][28] + t->Phi[167]*f->P[5][28] +
-            t->Phi[168]*f->P[6][28] + t->Phi[169]*f->P[7][28] + t->Phi[170]*f->P[8][28] +
-            t->Phi[171]*f->P[9][28] + t->Phi[172]*f->P[10][28] + t->Phi[173]*f->P[11][28] +
-            t->Phi[174]*f->P[12][28] + t->Phi[175]*f->P[13][28] + t->Phi[176]*f->P[14][28] +
-            t->Phi[177]*f->P[15][28] + t->Phi[178]*f->P[18][28] + t->Phi[179]*f->P[19][28] +
-            t->Phi[180]*f->P[20][28] + t->Phi[181]*f->P[21][28] + t->Phi[182]*f->P[22][28] +
-            t->Phi[183]*f->P[23][28] + t->Phi[184]*f->P[24][28] + t->Phi[185]*f->P[25][28] +
-            t->Phi[186]*f->P[26][28] + t->Phi[187]*f->P[27][28] + t->Phi[188]*f->P[28][28] +
-            t->Phi[189]*f->P[29][28];
-    w->M[29] = t->Phi[162]*f->P[0][29] + t->Phi[163]*f->P[1][29] + t->Phi[164]*f->P[2][29] +
-            t->Phi[165]*f->P[3][29] + t->Phi[166]*f->P[4][29] + t->Phi[167]*f->P[5][29] +
-            t->Phi[168]*f->P[6][29] + t->Phi[169]*f->P[7][29] + t->Phi[170]*f->P[8][29] +
-            t->Phi[171]*f->P[9][29] + t->Phi[172]*f->P[10][29] + t->Phi[173]*f->P[11][29] +
-            t->Phi[174]*f->P[12][29] + t->Phi[175]*f->P[13][29] + t->Phi[176]*f->P[14][29] +
-            t->Phi[177]*f->P[15][29] + t->Phi[178]*f->P[18][29] + t->Phi[179]*f->P[19][29] +
-            t->Phi[180]*f->P[20][29] + t->Phi[181]*f->P[21][29] + t->Phi[182]*f->P[22][29] +
-            t->Phi[183]*f->P[23][29] + t->Phi[184]*f->P[24][29] + t->Phi[185]*f->P[25][29] +
-            t->Phi[186]*f->P[26][29] + t->Phi[187]*f->P[27][29] + t->Phi[188]*f->P[28][29] +
-            t->Phi[189]*f->P[29][29];
-    w->M[30] = t->Phi[162]*f->P[0][30] + t->Phi[163]*f->P[1][30] + t->Phi[164]*f->P[2][30] +
-            t->Phi[165]*f->P[3][30] + t->Phi[166]*f->P[4][30] + t->Phi[167]*f->P[5][30] +
-            t->Phi[168]*f->P[6][30] + t->Phi[169]*f->P[7][30] + t->Phi[170]*f->P[8][30] +
-            t->Phi[171]*f->P[9][30] + t->Phi[172]*f->P[10][30] + t->Phi[173]*f->P[11][30] +
-            t->Phi[174]*f->P[12][30] + t->Phi[175]*f->P[13][30] + t->Phi[176]*f->P[14][30] +
-            t->Phi[177]*f->P[15][30] + t->Phi[178]*f->P[18][30] + t->Phi[179]*f->P[19][30] +
-            t->Phi[180]*f->P[20][30] + t->Phi[181]*f->P[21][30] + t->Phi[182]*f->P[22][30] +
-            t->Phi[183]*f->P[23][30] + t->Phi[184]*f->P[24][30] + t->Phi[185]*f->P[25][30] +
-            t->Phi[186]*f->P[26][30] + t->Phi[187]*f->P[27][30] + t->Phi[188]*f->P[28][30] +
-            t->Phi[189]*f->P[29][30];
-    w->M[31] = t->Phi[162]*f->P[0][31] + t->Phi[163]*f->P[1][31] + t->Phi[164]*f->P[2][31] +
-            t->Phi[165]*f->P[3][31] + t->Phi[166]*f->P[4][31] + t->Phi[167]*f->P[5][31] +
-            t->Phi[168]*f->P[6][31] + t->Phi[169]*f->P[7][31] + t->Phi[170]*f->P[8][31] +
-            t->Phi[171]*f->P[9][31] + t->Phi[172]*f->P[10][31] + t->Phi[173]*f->P[11][31] +
-            t->Phi[174]*f->P[12][31] + t->Phi[175]*f->P[13][31] + t->Phi[176]*f->P[14][31] +
-            t->Phi[177]*f->P[15][31] + t->Phi[178]*f->P[18][31] + t->Phi[179]*f->P[19][31] +
-            t->Phi[180]*f->P[20][31] + t->Phi[181]*f->P[21][31] + t->Phi[182]*f->P[22][31] +
-            t->Phi[183]*f->P[23][31] + t->Phi[184]*f->P[24][31] + t->Phi[185]*f->P[25][31] +
-            t->Phi[186]*f->P[26][31] + t->Phi[187]*f->P[27][31] + t->Phi[188]*f->P[28][31] +
-            t->Phi[189]*f->P[29][31];
+    int c;
+    lane_pair b[28];
+    b[0] = lane_pair_of(t->Phi[162], t->Phi[162]);
+    b[1] = lane_pair_of(t->Phi[163], t->Phi[163]);
+    b[2] = lane_pair_of(t->Phi[164], t->Phi[164]);
+    b[3] = lane_pair_of(t->Phi[165], t->Phi[165]);
+    b[4] = lane_pair_of(t->Phi[166], t->Phi[166]);
+    b[5] = lane_pair_of(t->Phi[167], t->Phi[167]);
+    b[6] = lane_pair_of(t->Phi[168], t->Phi[168]);
+    b[7] = lane_pair_of(t->Phi[169], t->Phi[169]);
+    b[8] = lane_pair_of(t->Phi[170], t->Phi[170]);
+    b[9] = lane_pair_of(t->Phi[171], t->Phi[171]);
+    b[10] = lane_pair_of(t->Phi[172], t->Phi[172]);
+    b[11] = lane_pair_of(t->Phi[173], t->Phi[173]);
+    b[12] = lane_pair_of(t->Phi[174], t->Phi[174]);
+    b[13] = lane_pair_of(t->Phi[175], t->Phi[175]);
+    b[14] = lane_pair_of(t->Phi[176], t->Phi[176]);
+    b[15] = lane_pair_of(t->Phi[177], t->Phi[177]);
+    b[16] = lane_pair_of(t->Phi[178], t->Phi[178]);
+    b[17] = lane_pair_of(t->Phi[179], t->Phi[179]);
+    b[18] = lane_pair_of(t->Phi[180], t->Phi[180]);
+    b[19] = lane_pair_of(t->Phi[181], t->Phi[181]);
+    b[20] = lane_pair_of(t->Phi[182], t->Phi[182]);
+    b[21] = lane_pair_of(t->Phi[183], t->Phi[183]);
+    b[22] = lane_pair_of(t->Phi[184], t->Phi[184]);
+    b[23] = lane_pair_of(t->Phi[185], t->Phi[185]);
+    b[24] = lane_pair_of(t->Phi[186], t->Phi[186]);
+    b[25] = lane_pair_of(t->Phi[187], t->Phi[187]);
+    b[26] = lane_pair_of(t->Phi[188], t->Phi[188]);
+    b[27] = lane_pair_of(t->Phi[189], t->Phi[189]);
+    for (c = 0; c + 1 < 32; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[15][c]));
+        acc = lane_pair_add_product(acc, b[16], lane_pair_load(&f->P[18][c]));
+        acc = lane_pair_add_product(acc, b[17], lane_pair_load(&f->P[19][c]));
+        acc = lane_pair_add_product(acc, b[18], lane_pair_load(&f->P[20][c]));
+        acc = lane_pair_add_product(acc, b[19], lane_pair_load(&f->P[21][c]));
+        acc = lane_pair_add_product(acc, b[20], lane_pair_load(&f->P[22][c]));
+        acc = lane_pair_add_product(acc, b[21], lane_pair_load(&f->P[23][c]));
+        acc = lane_pair_add_product(acc, b[22], lane_pair_load(&f->P[24][c]));
+        acc = lane_pair_add_product(acc, b[23], lane_pair_load(&f->P[25][c]));
+        acc = lane_pair_add_product(acc, b[24], lane_pair_load(&f->P[26][c]));
+        acc = lane_pair_add_product(acc, b[25], lane_pair_load(&f->P[27][c]));
+        acc = lane_pair_add_product(acc, b[26], lane_pair_load(&f->P[28][c]));
+        acc = lane_pair_add_product(acc, b[27], lane_pair_load(&f->P[29][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -6453,36 +5386,17 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_6(con
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
    (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar propagate_row_7(const
-        ned_doppler32_augmented_filter *restrict f, const ned_doppler32_augmented_transition
-        *restrict t, ned_doppler32_augmented_filter_scratch *restrict w)
+static ned_doppler32_augmented_scalar propagate_row_7(const ned_doppler32_augmented_filter *restrict
+        f, const ned_doppler32_augmented_transition *restrict t,
+        ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[7][7]; w->Pn[203] = v; check += v;
-    v = f->P[7][8]; w->Pn[204] = v; check += v;
-    v = f->P[7][9]; w->Pn[205] = v; check += v;
     v = f->P[7][10]*t->Phi[193]; w->Pn[206] = v; check += v;
     v = f->P[7][11]*t->Phi[194]; w->Pn[207] = v; check += v;
     v = f->P[7][12]*t->Phi[195]; w->Pn[208] = v; check += v;
     v = f->P[7][13]*t->Phi[196]; w->Pn[209] = v; check += v;
     v = f->P[7][14]*t->Phi[197]; w->Pn[210] = v; check += v;
     v = f->P[7][15]*t->Phi[198]; w->Pn[211] = v; check += v;
-    v = f->P[7][16]; w->Pn[212] = v; check += v;
-    v = f->P[7][17]; w->Pn[213] = v; check += v;
-    v = f->P[7][18]; w->Pn[214] = v; check += v;
-    v = f->P[7][19]; w->Pn[215] = v; check += v;
-    v = f->P[7][20]; w->Pn[216] = v; check += v;
-    v = f->P[7][21]; w->Pn[217] = v; check += v;
-    v = f->P[7][22]; w->Pn[218] = v; check += v;
-    v = f->P[7][23]; w->Pn[219] = v; check += v;
-    v = f->P[7][24]; w->Pn[220] = v; check += v;
-    v = f->P[7][25]; w->Pn[221] = v; check += v;
-    v = f->P[7][26]; w->Pn[222] = v; check += v;
-    v = f->P[7][27]; w->Pn[223] = v; check += v;
-    v = f->P[7][28]; w->Pn[224] = v; check += v;
-    v = f->P[7][29]; w->Pn[225] = v; check += v;
-    v = f->P[7][30]; w->Pn[226] = v; check += v;
-    v = f->P[7][31]; w->Pn[227] = v; check += v;
     return check - check;
 }
 
@@ -6493,30 +5407,12 @@ static ned_doppler32_augmented_scalar propagate_row_8(const ned_doppler32_augmen
         ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[8][8]; w->Pn[228] = v; check += v;
-    v = f->P[8][9]; w->Pn[229] = v; check += v;
     v = f->P[8][10]*t->Phi[193]; w->Pn[230] = v; check += v;
     v = f->P[8][11]*t->Phi[194]; w->Pn[231] = v; check += v;
     v = f->P[8][12]*t->Phi[195]; w->Pn[232] = v; check += v;
     v = f->P[8][13]*t->Phi[196]; w->Pn[233] = v; check += v;
     v = f->P[8][14]*t->Phi[197]; w->Pn[234] = v; check += v;
     v = f->P[8][15]*t->Phi[198]; w->Pn[235] = v; check += v;
-    v = f->P[8][16]; w->Pn[236] = v; check += v;
-    v = f->P[8][17]; w->Pn[237] = v; check += v;
-    v = f->P[8][18]; w->Pn[238] = v; check += v;
-    v = f->P[8][19]; w->Pn[239] = v; check += v;
-    v = f->P[8][20]; w->Pn[240] = v; check += v;
-    v = f->P[8][21]; w->Pn[241] = v; check += v;
-    v = f->P[8][22]; w->Pn[242] = v; check += v;
-    v = f->P[8][23]; w->Pn[243] = v; check += v;
-    v = f->P[8][24]; w->Pn[244] = v; check += v;
-    v = f->P[8][25]; w->Pn[245] = v; check += v;
-    v = f->P[8][26]; w->Pn[246] = v; check += v;
-    v = f->P[8][27]; w->Pn[247] = v; check += v;
-    v = f->P[8][28]; w->Pn[248] = v; check += v;
-    v = f->P[8][29]; w->Pn[249] = v; check += v;
-    v = f->P[8][30]; w->Pn[250] = v; check += v;
-    v = f->P[8][31]; w->Pn[251] = v; check += v;
     return check - check;
 }
 
@@ -6527,29 +5423,12 @@ static ned_doppler32_augmented_scalar propagate_row_9(const ned_doppler32_augmen
         ned_doppler32_augmented_filter_scratch *restrict w)
 {
     ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[9][9]; w->Pn[252] = v; check += v;
     v = f->P[9][10]*t->Phi[193]; w->Pn[253] = v; check += v;
     v = f->P[9][11]*t->Phi[194]; w->Pn[254] = v; check += v;
     v = f->P[9][12]*t->Phi[195]; w->Pn[255] = v; check += v;
     v = f->P[9][13]*t->Phi[196]; w->Pn[256] = v; check += v;
     v = f->P[9][14]*t->Phi[197]; w->Pn[257] = v; check += v;
     v = f->P[9][15]*t->Phi[198]; w->Pn[258] = v; check += v;
-    v = f->P[9][16]; w->Pn[259] = v; check += v;
-    v = f->P[9][17]; w->Pn[260] = v; check += v;
-    v = f->P[9][18]; w->Pn[261] = v; check += v;
-    v = f->P[9][19]; w->Pn[262] = v; check += v;
-    v = f->P[9][20]; w->Pn[263] = v; check += v;
-    v = f->P[9][21]; w->Pn[264] = v; check += v;
-    v = f->P[9][22]; w->Pn[265] = v; check += v;
-    v = f->P[9][23]; w->Pn[266] = v; check += v;
-    v = f->P[9][24]; w->Pn[267] = v; check += v;
-    v = f->P[9][25]; w->Pn[268] = v; check += v;
-    v = f->P[9][26]; w->Pn[269] = v; check += v;
-    v = f->P[9][27]; w->Pn[270] = v; check += v;
-    v = f->P[9][28]; w->Pn[271] = v; check += v;
-    v = f->P[9][29]; w->Pn[272] = v; check += v;
-    v = f->P[9][30]; w->Pn[273] = v; check += v;
-    v = f->P[9][31]; w->Pn[274] = v; check += v;
     return check - check;
 }
 
@@ -6952,286 +5831,6 @@ static ned_doppler32_augmented_scalar propagate_row_15(const ned_doppler32_augme
     return check - check;
 }
 
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ned_doppler32_augmented_scalar propagate_row_16(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[16][16]; w->Pn[392] = v; check += v;
-    v = f->P[16][17]; w->Pn[393] = v; check += v;
-    v = f->P[16][18]; w->Pn[394] = v; check += v;
-    v = f->P[16][19]; w->Pn[395] = v; check += v;
-    v = f->P[16][20]; w->Pn[396] = v; check += v;
-    v = f->P[16][21]; w->Pn[397] = v; check += v;
-    v = f->P[16][22]; w->Pn[398] = v; check += v;
-    v = f->P[16][23]; w->Pn[399] = v; check += v;
-    v = f->P[16][24]; w->Pn[400] = v; check += v;
-    v = f->P[16][25]; w->Pn[401] = v; check += v;
-    v = f->P[16][26]; w->Pn[402] = v; check += v;
-    v = f->P[16][27]; w->Pn[403] = v; check += v;
-    v = f->P[16][28]; w->Pn[404] = v; check += v;
-    v = f->P[16][29]; w->Pn[405] = v; check += v;
-    v = f->P[16][30]; w->Pn[406] = v; check += v;
-    v = f->P[16][31]; w->Pn[407] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ned_doppler32_augmented_scalar propagate_row_17(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[17][17]; w->Pn[408] = v; check += v;
-    v = f->P[17][18]; w->Pn[409] = v; check += v;
-    v = f->P[17][19]; w->Pn[410] = v; check += v;
-    v = f->P[17][20]; w->Pn[411] = v; check += v;
-    v = f->P[17][21]; w->Pn[412] = v; check += v;
-    v = f->P[17][22]; w->Pn[413] = v; check += v;
-    v = f->P[17][23]; w->Pn[414] = v; check += v;
-    v = f->P[17][24]; w->Pn[415] = v; check += v;
-    v = f->P[17][25]; w->Pn[416] = v; check += v;
-    v = f->P[17][26]; w->Pn[417] = v; check += v;
-    v = f->P[17][27]; w->Pn[418] = v; check += v;
-    v = f->P[17][28]; w->Pn[419] = v; check += v;
-    v = f->P[17][29]; w->Pn[420] = v; check += v;
-    v = f->P[17][30]; w->Pn[421] = v; check += v;
-    v = f->P[17][31]; w->Pn[422] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ned_doppler32_augmented_scalar propagate_row_18(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[18][18]; w->Pn[423] = v; check += v;
-    v = f->P[18][19]; w->Pn[424] = v; check += v;
-    v = f->P[18][20]; w->Pn[425] = v; check += v;
-    v = f->P[18][21]; w->Pn[426] = v; check += v;
-    v = f->P[18][22]; w->Pn[427] = v; check += v;
-    v = f->P[18][23]; w->Pn[428] = v; check += v;
-    v = f->P[18][24]; w->Pn[429] = v; check += v;
-    v = f->P[18][25]; w->Pn[430] = v; check += v;
-    v = f->P[18][26]; w->Pn[431] = v; check += v;
-    v = f->P[18][27]; w->Pn[432] = v; check += v;
-    v = f->P[18][28]; w->Pn[433] = v; check += v;
-    v = f->P[18][29]; w->Pn[434] = v; check += v;
-    v = f->P[18][30]; w->Pn[435] = v; check += v;
-    v = f->P[18][31]; w->Pn[436] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ned_doppler32_augmented_scalar propagate_row_19(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[19][19]; w->Pn[437] = v; check += v;
-    v = f->P[19][20]; w->Pn[438] = v; check += v;
-    v = f->P[19][21]; w->Pn[439] = v; check += v;
-    v = f->P[19][22]; w->Pn[440] = v; check += v;
-    v = f->P[19][23]; w->Pn[441] = v; check += v;
-    v = f->P[19][24]; w->Pn[442] = v; check += v;
-    v = f->P[19][25]; w->Pn[443] = v; check += v;
-    v = f->P[19][26]; w->Pn[444] = v; check += v;
-    v = f->P[19][27]; w->Pn[445] = v; check += v;
-    v = f->P[19][28]; w->Pn[446] = v; check += v;
-    v = f->P[19][29]; w->Pn[447] = v; check += v;
-    v = f->P[19][30]; w->Pn[448] = v; check += v;
-    v = f->P[19][31]; w->Pn[449] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ned_doppler32_augmented_scalar propagate_row_20(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[20][20]; w->Pn[450] = v; check += v;
-    v = f->P[20][21]; w->Pn[451] = v; check += v;
-    v = f->P[20][22]; w->Pn[452] = v; check += v;
-    v = f->P[20][23]; w->Pn[453] = v; check += v;
-    v = f->P[20][24]; w->Pn[454] = v; check += v;
-    v = f->P[20][25]; w->Pn[455] = v; check += v;
-    v = f->P[20][26]; w->Pn[456] = v; check += v;
-    v = f->P[20][27]; w->Pn[457] = v; check += v;
-    v = f->P[20][28]; w->Pn[458] = v; check += v;
-    v = f->P[20][29]; w->Pn[459] = v; check += v;
-    v = f->P[20][30]; w->Pn[460] = v; check += v;
-    v = f->P[20][31]; w->Pn[461] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ned_doppler32_augmented_scalar propagate_row_21(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[21][21]; w->Pn[462] = v; check += v;
-    v = f->P[21][22]; w->Pn[463] = v; check += v;
-    v = f->P[21][23]; w->Pn[464] = v; check += v;
-    v = f->P[21][24]; w->Pn[465] = v; check += v;
-    v = f->P[21][25]; w->Pn[466] = v; check += v;
-    v = f->P[21][26]; w->Pn[467] = v; check += v;
-    v = f->P[21][27]; w->Pn[468] = v; check += v;
-    v = f->P[21][28]; w->Pn[469] = v; check += v;
-    v = f->P[21][29]; w->Pn[470] = v; check += v;
-    v = f->P[21][30]; w->Pn[471] = v; check += v;
-    v = f->P[21][31]; w->Pn[472] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ned_doppler32_augmented_scalar propagate_row_22(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[22][22]; w->Pn[473] = v; check += v;
-    v = f->P[22][23]; w->Pn[474] = v; check += v;
-    v = f->P[22][24]; w->Pn[475] = v; check += v;
-    v = f->P[22][25]; w->Pn[476] = v; check += v;
-    v = f->P[22][26]; w->Pn[477] = v; check += v;
-    v = f->P[22][27]; w->Pn[478] = v; check += v;
-    v = f->P[22][28]; w->Pn[479] = v; check += v;
-    v = f->P[22][29]; w->Pn[480] = v; check += v;
-    v = f->P[22][30]; w->Pn[481] = v; check += v;
-    v = f->P[22][31]; w->Pn[482] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ned_doppler32_augmented_scalar propagate_row_23(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[23][23]; w->Pn[483] = v; check += v;
-    v = f->P[23][24]; w->Pn[484] = v; check += v;
-    v = f->P[23][25]; w->Pn[485] = v; check += v;
-    v = f->P[23][26]; w->Pn[486] = v; check += v;
-    v = f->P[23][27]; w->Pn[487] = v; check += v;
-    v = f->P[23][28]; w->Pn[488] = v; check += v;
-    v = f->P[23][29]; w->Pn[489] = v; check += v;
-    v = f->P[23][30]; w->Pn[490] = v; check += v;
-    v = f->P[23][31]; w->Pn[491] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ned_doppler32_augmented_scalar propagate_row_24(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[24][24]; w->Pn[492] = v; check += v;
-    v = f->P[24][25]; w->Pn[493] = v; check += v;
-    v = f->P[24][26]; w->Pn[494] = v; check += v;
-    v = f->P[24][27]; w->Pn[495] = v; check += v;
-    v = f->P[24][28]; w->Pn[496] = v; check += v;
-    v = f->P[24][29]; w->Pn[497] = v; check += v;
-    v = f->P[24][30]; w->Pn[498] = v; check += v;
-    v = f->P[24][31]; w->Pn[499] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ned_doppler32_augmented_scalar propagate_row_25(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[25][25]; w->Pn[500] = v; check += v;
-    v = f->P[25][26]; w->Pn[501] = v; check += v;
-    v = f->P[25][27]; w->Pn[502] = v; check += v;
-    v = f->P[25][28]; w->Pn[503] = v; check += v;
-    v = f->P[25][29]; w->Pn[504] = v; check += v;
-    v = f->P[25][30]; w->Pn[505] = v; check += v;
-    v = f->P[25][31]; w->Pn[506] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ned_doppler32_augmented_scalar propagate_row_26(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[26][26]; w->Pn[507] = v; check += v;
-    v = f->P[26][27]; w->Pn[508] = v; check += v;
-    v = f->P[26][28]; w->Pn[509] = v; check += v;
-    v = f->P[26][29]; w->Pn[510] = v; check += v;
-    v = f->P[26][30]; w->Pn[511] = v; check += v;
-    v = f->P[26][31]; w->Pn[512] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ned_doppler32_augmented_scalar propagate_row_27(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[27][27]; w->Pn[513] = v; check += v;
-    v = f->P[27][28]; w->Pn[514] = v; check += v;
-    v = f->P[27][29]; w->Pn[515] = v; check += v;
-    v = f->P[27][30]; w->Pn[516] = v; check += v;
-    v = f->P[27][31]; w->Pn[517] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ned_doppler32_augmented_scalar propagate_row_28(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[28][28]; w->Pn[518] = v; check += v;
-    v = f->P[28][29]; w->Pn[519] = v; check += v;
-    v = f->P[28][30]; w->Pn[520] = v; check += v;
-    v = f->P[28][31]; w->Pn[521] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ned_doppler32_augmented_scalar propagate_row_29(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[29][29]; w->Pn[522] = v; check += v;
-    v = f->P[29][30]; w->Pn[523] = v; check += v;
-    v = f->P[29][31]; w->Pn[524] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ned_doppler32_augmented_scalar propagate_row_30(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[30][30]; w->Pn[525] = v; check += v;
-    v = f->P[30][31]; w->Pn[526] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ned_doppler32_augmented_scalar propagate_row_31(const ned_doppler32_augmented_filter
-        *restrict f, ned_doppler32_augmented_filter_scratch *restrict w)
-{
-    ned_doppler32_augmented_scalar v, check = 0.0;
-    v = f->P[31][31]; w->Pn[527] = v; check += v;
-    return check - check;
-}
-
 int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *restrict f, const
         ned_doppler32_augmented_transition *restrict t,
                 ned_doppler32_augmented_workspace *restrict work)
@@ -7240,6 +5839,7 @@ int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *restrict f, 
     ned_doppler32_augmented_scalar check = 0.0;
     modelgen_bits signs;
     ned_doppler32_augmented_scalar sum_check = 0.0;
+    ned_doppler32_augmented_scalar kept[2] = { 0.0, 0.0 }, kept_check;
     /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
     signs = modelgen_bits_of(t->Qd[0]);
     signs |= modelgen_bits_of(t->Qd[32]);
@@ -7345,31 +5945,97 @@ int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *restrict f, 
     sum_check += propagate_row_14(t, w);
     phi_times_p_row_15(f, t, w);
     sum_check += propagate_row_15(t, w);
-    sum_check += propagate_row_16(f, w);
-    sum_check += propagate_row_17(f, w);
-    sum_check += propagate_row_18(f, w);
-    sum_check += propagate_row_19(f, w);
-    sum_check += propagate_row_20(f, w);
-    sum_check += propagate_row_21(f, w);
-    sum_check += propagate_row_22(f, w);
-    sum_check += propagate_row_23(f, w);
-    sum_check += propagate_row_24(f, w);
-    sum_check += propagate_row_25(f, w);
-    sum_check += propagate_row_26(f, w);
-    sum_check += propagate_row_27(f, w);
-    sum_check += propagate_row_28(f, w);
-    sum_check += propagate_row_29(f, w);
-    sum_check += propagate_row_30(f, w);
-    sum_check += propagate_row_31(f, w);
     /* a row's sum that is not finite: a value that is not, or an overflow of finite values */
-    if (sum_check != 0.0) {
+    if (sum_check != 0.0) { /* the entries of Pn computed (the kept pairs are not) */
         int e;
         sum_check = 0.0;
-        for (e = 0; e < NED_DOPPLER32_AUGMENTED_N_PACKED; ++e) {
+        for (e = 0; e < 32; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 32; e < 63; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 63; e < 93; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 93; e < 122; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 122; e < 150; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 150; e < 177; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 177; e < 203; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 206; e < 212; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 230; e < 236; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 253; e < 259; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 275; e < 297; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 297; e < 318; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 318; e < 338; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 338; e < 357; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 357; e < 375; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 375; e < 392; ++e) {
             sum_check += w->Pn[e] - w->Pn[e];
         }
     }
     check += sum_check;
+    /* the pairs of random constants without noise, P_n = P there: left in P, checked finite */
+    kept[0] += f->P[16][16];
+    kept[1] += f->P[16][17];
+    kept[0] += f->P[16][30];
+    kept[1] += f->P[16][31];
+    kept[0] += f->P[17][17];
+    kept[1] += f->P[17][30];
+    kept[0] += f->P[17][31];
+    kept[1] += f->P[30][30];
+    kept[0] += f->P[30][31];
+    kept[1] += f->P[31][31];
+    kept_check = kept[0] + kept[1];
+    if (kept_check - kept_check != 0.0) {
+        int j;
+        kept_check = 0.0;
+        for (j = 16; j < 18; ++j) {
+            kept_check += f->P[16][j] - f->P[16][j];
+        }
+        for (j = 30; j < 32; ++j) {
+            kept_check += f->P[16][j] - f->P[16][j];
+        }
+        for (j = 17; j < 18; ++j) {
+            kept_check += f->P[17][j] - f->P[17][j];
+        }
+        for (j = 30; j < 32; ++j) {
+            kept_check += f->P[17][j] - f->P[17][j];
+        }
+        for (j = 30; j < 32; ++j) {
+            kept_check += f->P[30][j] - f->P[30][j];
+        }
+        for (j = 31; j < 32; ++j) {
+            kept_check += f->P[31][j] - f->P[31][j];
+        }
+    } else {
+        kept_check = 0.0;
+    }
+    check += kept_check;
     if (check != 0.0) {
         return NED_DOPPLER32_AUGMENTED_ERR_NONFINITE;
     }
@@ -7590,78 +6256,27 @@ int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *restrict f, 
     f->P[29][6] = f->P[6][29];
     f->P[30][6] = f->P[6][30];
     f->P[31][6] = f->P[6][31];
-    memcpy(&f->P[7][7], &w->Pn[203], 25 * sizeof w->Pn[0]);
-    f->P[8][7] = f->P[7][8];
-    f->P[9][7] = f->P[7][9];
+    memcpy(&f->P[7][10], &w->Pn[206], 6 * sizeof w->Pn[0]);
     f->P[10][7] = f->P[7][10];
     f->P[11][7] = f->P[7][11];
     f->P[12][7] = f->P[7][12];
     f->P[13][7] = f->P[7][13];
     f->P[14][7] = f->P[7][14];
     f->P[15][7] = f->P[7][15];
-    f->P[16][7] = f->P[7][16];
-    f->P[17][7] = f->P[7][17];
-    f->P[18][7] = f->P[7][18];
-    f->P[19][7] = f->P[7][19];
-    f->P[20][7] = f->P[7][20];
-    f->P[21][7] = f->P[7][21];
-    f->P[22][7] = f->P[7][22];
-    f->P[23][7] = f->P[7][23];
-    f->P[24][7] = f->P[7][24];
-    f->P[25][7] = f->P[7][25];
-    f->P[26][7] = f->P[7][26];
-    f->P[27][7] = f->P[7][27];
-    f->P[28][7] = f->P[7][28];
-    f->P[29][7] = f->P[7][29];
-    f->P[30][7] = f->P[7][30];
-    f->P[31][7] = f->P[7][31];
-    memcpy(&f->P[8][8], &w->Pn[228], 24 * sizeof w->Pn[0]);
-    f->P[9][8] = f->P[8][9];
+    memcpy(&f->P[8][10], &w->Pn[230], 6 * sizeof w->Pn[0]);
     f->P[10][8] = f->P[8][10];
     f->P[11][8] = f->P[8][11];
     f->P[12][8] = f->P[8][12];
     f->P[13][8] = f->P[8][13];
     f->P[14][8] = f->P[8][14];
     f->P[15][8] = f->P[8][15];
-    f->P[16][8] = f->P[8][16];
-    f->P[17][8] = f->P[8][17];
-    f->P[18][8] = f->P[8][18];
-    f->P[19][8] = f->P[8][19];
-    f->P[20][8] = f->P[8][20];
-    f->P[21][8] = f->P[8][21];
-    f->P[22][8] = f->P[8][22];
-    f->P[23][8] = f->P[8][23];
-    f->P[24][8] = f->P[8][24];
-    f->P[25][8] = f->P[8][25];
-    f->P[26][8] = f->P[8][26];
-    f->P[27][8] = f->P[8][27];
-    f->P[28][8] = f->P[8][28];
-    f->P[29][8] = f->P[8][29];
-    f->P[30][8] = f->P[8][30];
-    f->P[31][8] = f->P[8][31];
-    memcpy(&f->P[9][9], &w->Pn[252], 23 * sizeof w->Pn[0]);
+    memcpy(&f->P[9][10], &w->Pn[253], 6 * sizeof w->Pn[0]);
     f->P[10][9] = f->P[9][10];
     f->P[11][9] = f->P[9][11];
     f->P[12][9] = f->P[9][12];
     f->P[13][9] = f->P[9][13];
     f->P[14][9] = f->P[9][14];
     f->P[15][9] = f->P[9][15];
-    f->P[16][9] = f->P[9][16];
-    f->P[17][9] = f->P[9][17];
-    f->P[18][9] = f->P[9][18];
-    f->P[19][9] = f->P[9][19];
-    f->P[20][9] = f->P[9][20];
-    f->P[21][9] = f->P[9][21];
-    f->P[22][9] = f->P[9][22];
-    f->P[23][9] = f->P[9][23];
-    f->P[24][9] = f->P[9][24];
-    f->P[25][9] = f->P[9][25];
-    f->P[26][9] = f->P[9][26];
-    f->P[27][9] = f->P[9][27];
-    f->P[28][9] = f->P[9][28];
-    f->P[29][9] = f->P[9][29];
-    f->P[30][9] = f->P[9][30];
-    f->P[31][9] = f->P[9][31];
     memcpy(&f->P[10][10], &w->Pn[275], 22 * sizeof w->Pn[0]);
     f->P[11][10] = f->P[10][11];
     f->P[12][10] = f->P[10][12];
@@ -7779,142 +6394,6 @@ int ned_doppler32_augmented_predict(ned_doppler32_augmented_filter *restrict f, 
     f->P[29][15] = f->P[15][29];
     f->P[30][15] = f->P[15][30];
     f->P[31][15] = f->P[15][31];
-    memcpy(&f->P[16][16], &w->Pn[392], 16 * sizeof w->Pn[0]);
-    f->P[17][16] = f->P[16][17];
-    f->P[18][16] = f->P[16][18];
-    f->P[19][16] = f->P[16][19];
-    f->P[20][16] = f->P[16][20];
-    f->P[21][16] = f->P[16][21];
-    f->P[22][16] = f->P[16][22];
-    f->P[23][16] = f->P[16][23];
-    f->P[24][16] = f->P[16][24];
-    f->P[25][16] = f->P[16][25];
-    f->P[26][16] = f->P[16][26];
-    f->P[27][16] = f->P[16][27];
-    f->P[28][16] = f->P[16][28];
-    f->P[29][16] = f->P[16][29];
-    f->P[30][16] = f->P[16][30];
-    f->P[31][16] = f->P[16][31];
-    memcpy(&f->P[17][17], &w->Pn[408], 15 * sizeof w->Pn[0]);
-    f->P[18][17] = f->P[17][18];
-    f->P[19][17] = f->P[17][19];
-    f->P[20][17] = f->P[17][20];
-    f->P[21][17] = f->P[17][21];
-    f->P[22][17] = f->P[17][22];
-    f->P[23][17] = f->P[17][23];
-    f->P[24][17] = f->P[17][24];
-    f->P[25][17] = f->P[17][25];
-    f->P[26][17] = f->P[17][26];
-    f->P[27][17] = f->P[17][27];
-    f->P[28][17] = f->P[17][28];
-    f->P[29][17] = f->P[17][29];
-    f->P[30][17] = f->P[17][30];
-    f->P[31][17] = f->P[17][31];
-    memcpy(&f->P[18][18], &w->Pn[423], 14 * sizeof w->Pn[0]);
-    f->P[19][18] = f->P[18][19];
-    f->P[20][18] = f->P[18][20];
-    f->P[21][18] = f->P[18][21];
-    f->P[22][18] = f->P[18][22];
-    f->P[23][18] = f->P[18][23];
-    f->P[24][18] = f->P[18][24];
-    f->P[25][18] = f->P[18][25];
-    f->P[26][18] = f->P[18][26];
-    f->P[27][18] = f->P[18][27];
-    f->P[28][18] = f->P[18][28];
-    f->P[29][18] = f->P[18][29];
-    f->P[30][18] = f->P[18][30];
-    f->P[31][18] = f->P[18][31];
-    memcpy(&f->P[19][19], &w->Pn[437], 13 * sizeof w->Pn[0]);
-    f->P[20][19] = f->P[19][20];
-    f->P[21][19] = f->P[19][21];
-    f->P[22][19] = f->P[19][22];
-    f->P[23][19] = f->P[19][23];
-    f->P[24][19] = f->P[19][24];
-    f->P[25][19] = f->P[19][25];
-    f->P[26][19] = f->P[19][26];
-    f->P[27][19] = f->P[19][27];
-    f->P[28][19] = f->P[19][28];
-    f->P[29][19] = f->P[19][29];
-    f->P[30][19] = f->P[19][30];
-    f->P[31][19] = f->P[19][31];
-    memcpy(&f->P[20][20], &w->Pn[450], 12 * sizeof w->Pn[0]);
-    f->P[21][20] = f->P[20][21];
-    f->P[22][20] = f->P[20][22];
-    f->P[23][20] = f->P[20][23];
-    f->P[24][20] = f->P[20][24];
-    f->P[25][20] = f->P[20][25];
-    f->P[26][20] = f->P[20][26];
-    f->P[27][20] = f->P[20][27];
-    f->P[28][20] = f->P[20][28];
-    f->P[29][20] = f->P[20][29];
-    f->P[30][20] = f->P[20][30];
-    f->P[31][20] = f->P[20][31];
-    memcpy(&f->P[21][21], &w->Pn[462], 11 * sizeof w->Pn[0]);
-    f->P[22][21] = f->P[21][22];
-    f->P[23][21] = f->P[21][23];
-    f->P[24][21] = f->P[21][24];
-    f->P[25][21] = f->P[21][25];
-    f->P[26][21] = f->P[21][26];
-    f->P[27][21] = f->P[21][27];
-    f->P[28][21] = f->P[21][28];
-    f->P[29][21] = f->P[21][29];
-    f->P[30][21] = f->P[21][30];
-    f->P[31][21] = f->P[21][31];
-    memcpy(&f->P[22][22], &w->Pn[473], 10 * sizeof w->Pn[0]);
-    f->P[23][22] = f->P[22][23];
-    f->P[24][22] = f->P[22][24];
-    f->P[25][22] = f->P[22][25];
-    f->P[26][22] = f->P[22][26];
-    f->P[27][22] = f->P[22][27];
-    f->P[28][22] = f->P[22][28];
-    f->P[29][22] = f->P[22][29];
-    f->P[30][22] = f->P[22][30];
-    f->P[31][22] = f->P[22][31];
-    memcpy(&f->P[23][23], &w->Pn[483], 9 * sizeof w->Pn[0]);
-    f->P[24][23] = f->P[23][24];
-    f->P[25][23] = f->P[23][25];
-    f->P[26][23] = f->P[23][26];
-    f->P[27][23] = f->P[23][27];
-    f->P[28][23] = f->P[23][28];
-    f->P[29][23] = f->P[23][29];
-    f->P[30][23] = f->P[23][30];
-    f->P[31][23] = f->P[23][31];
-    memcpy(&f->P[24][24], &w->Pn[492], 8 * sizeof w->Pn[0]);
-    f->P[25][24] = f->P[24][25];
-    f->P[26][24] = f->P[24][26];
-    f->P[27][24] = f->P[24][27];
-    f->P[28][24] = f->P[24][28];
-    f->P[29][24] = f->P[24][29];
-    f->P[30][24] = f->P[24][30];
-    f->P[31][24] = f->P[24][31];
-    memcpy(&f->P[25][25], &w->Pn[500], 7 * sizeof w->Pn[0]);
-    f->P[26][25] = f->P[25][26];
-    f->P[27][25] = f->P[25][27];
-    f->P[28][25] = f->P[25][28];
-    f->P[29][25] = f->P[25][29];
-    f->P[30][25] = f->P[25][30];
-    f->P[31][25] = f->P[25][31];
-    memcpy(&f->P[26][26], &w->Pn[507], 6 * sizeof w->Pn[0]);
-    f->P[27][26] = f->P[26][27];
-    f->P[28][26] = f->P[26][28];
-    f->P[29][26] = f->P[26][29];
-    f->P[30][26] = f->P[26][30];
-    f->P[31][26] = f->P[26][31];
-    memcpy(&f->P[27][27], &w->Pn[513], 5 * sizeof w->Pn[0]);
-    f->P[28][27] = f->P[27][28];
-    f->P[29][27] = f->P[27][29];
-    f->P[30][27] = f->P[27][30];
-    f->P[31][27] = f->P[27][31];
-    memcpy(&f->P[28][28], &w->Pn[518], 4 * sizeof w->Pn[0]);
-    f->P[29][28] = f->P[28][29];
-    f->P[30][28] = f->P[28][30];
-    f->P[31][28] = f->P[28][31];
-    memcpy(&f->P[29][29], &w->Pn[522], 3 * sizeof w->Pn[0]);
-    f->P[30][29] = f->P[29][30];
-    f->P[31][29] = f->P[29][31];
-    memcpy(&f->P[30][30], &w->Pn[525], 2 * sizeof w->Pn[0]);
-    f->P[31][30] = f->P[30][31];
-    memcpy(&f->P[31][31], &w->Pn[527], 1 * sizeof w->Pn[0]);
     return NED_DOPPLER32_AUGMENTED_OK;
 }
 

@@ -50,6 +50,11 @@ static inline double lane_pair_sum(const lane_pair acc)
     memcpy(lanes, &acc, sizeof lanes);
     return lanes[0] + lanes[1];
 }
+
+static inline void lane_pair_store(double *a, const lane_pair acc) /* a[0], a[1] */
+{
+    memcpy(a, &acc, sizeof acc);
+}
 #else
 typedef struct {
     MODELGEN_SCALAR lane[2];
@@ -91,6 +96,12 @@ static inline lane_pair lane_pair_add_product(const lane_pair acc, const lane_pa
 static inline MODELGEN_SCALAR lane_pair_sum(const lane_pair acc)
 {
     return acc.lane[0] + acc.lane[1];
+}
+
+static inline void lane_pair_store(MODELGEN_SCALAR *a, const lane_pair acc) /* a[0], a[1] */
+{
+    a[0] = acc.lane[0];
+    a[1] = acc.lane[1];
 }
 #endif
 

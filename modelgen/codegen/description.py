@@ -28,6 +28,9 @@ from modelgen.codegen.kernels import (
     compact_kernels,
     covariance_commit,
     covariance_predict,
+    kept_pairs,
+    kept_pairs_to_check,
+    predict_commit,
     discretize_cost,
     doubling_cost,
     state_predict,
@@ -173,6 +176,25 @@ class FilterDescription:
         if self.options.ud or self.packed or self.compact:
             return []
         return covariance_commit(self.structure.n_states)
+
+    @cached_property
+    def kept_pairs(self) -> list[tuple[int, int]]:
+        """The pairs the unrolled covariance prediction leaves in P as they are (``kernels.kept_pairs``)."""
+        if self.options.ud or self.packed or self.compact:
+            return []
+        return kept_pairs(self.structure, self.packed)
+
+    @cached_property
+    def kept_pairs_to_check(self) -> list[tuple[int, int]]:
+        """The :attr:`kept_pairs` that predict checks finite itself (``kernels.kept_pairs_to_check``)."""
+        return kept_pairs_to_check(self.structure, self.kept_pairs)
+
+    @cached_property
+    def predict_commit(self) -> list[CommitRow]:
+        """The prediction's commit in full storage: :attr:`covariance_commit` without the :attr:`kept_pairs`."""
+        if not self.covariance_commit:
+            return []
+        return predict_commit(self.structure.n_states, self.kept_pairs)
 
     @cached_property
     def state_predict(self):

@@ -181,6 +181,36 @@ class KernelBlock:
         return owner in self.owners()
 
 
+def kept_pairs(structure: FilterStructure, packed: bool) -> list[tuple[int, int]]:
+    """The pairs i <= j that the prediction leaves in P as they are (full storage only; row-major).
+
+    Where rows i and j of Phi are both e_i (random constants) and Q_d(i, j)
+    is structurally zero, P_n(i, j) = P(i, j) exactly: the unrolled
+    prediction neither computes nor commits them (P keeps them in both
+    triangles), it only sums them to check that they are finite, as it
+    checks what it computes.  Packed storage commits Pn whole, so keeps none.
+    """
+    if packed:
+        return []
+    unit = sorted(structure.unit_rows)
+    return [(i, j) for i in unit for j in unit if j >= i and not structure.Qd[i, j]]
+
+
+def kept_pairs_to_check(structure: FilterStructure, kept: list[tuple[int, int]]) -> list[tuple[int, int]]:
+    """The kept pairs whose finiteness the prediction must check itself: both constants read by no other row of Phi.
+
+    A value that is not finite in P(i, j) = P(j, i), with a row k of Phi
+    that is not e_k reading column i, reaches M(k, j) = sum_c Phi(k, c) P(c, j),
+    and so P_n(k, j) (computed: row k is not e_k), or P_n(j, k) = sum_c P(j, c)
+    Phi(k, c) when j < k; a NaN or an infinity stays one through sums and
+    products, so predict refuses it by the check of what it computes.  Only
+    where neither i nor j is read so does it sum the pair itself.
+    """
+    unit = set(structure.unit_rows)
+    read = {c for k, c in structure.entries("Phi") if k not in unit and c in unit}
+    return [(i, j) for i, j in kept if i not in read and j not in read]
+
+
 def covariance_predict(structure: FilterStructure, packed: bool) -> tuple[list[KernelBlock], OperationCount]:
     """Unrolled P_n = Phi P Phi^T + Q_d (upper triangle), row by row.
 
@@ -190,11 +220,12 @@ def covariance_predict(structure: FilterStructure, packed: bool) -> tuple[list[K
     ``phi_times_p_row_i`` block right before the ``propagate_row_i`` that
     reads it (for a unit row, M's row is P's row, read in place).  ``Pn``
     gets each (i, j), i <= j, once, packed whatever P's storage (``packed``
-    is P's, which M reads).
+    is P's, which M reads), but the :func:`kept_pairs`, which P keeps.
     """
     n = structure.n_states
     rows = structure.rows("Phi")
     unit = set(structure.unit_rows)
+    kept = set(kept_pairs(structure, packed))
     _phi = phi_reference(structure)
     mul = add = 0
     blocks = []
@@ -216,6 +247,8 @@ def covariance_predict(structure: FilterStructure, packed: bool) -> tuple[list[K
             blocks.append(KernelBlock(f"phi_times_p_row_{i}", tuple(lines)))
         lines = []
         for j in range(i, n):  # row i of Pn = M Phi^T + Q_d, upper triangle only
+            if (i, j) in kept:
+                continue
             if j in unit:
                 terms = [(m_ref(i, j),)]
             else:
@@ -229,7 +262,8 @@ def covariance_predict(structure: FilterStructure, packed: bool) -> tuple[list[K
             # P's storage (the commit mirrors it), and added to the row's sum
             # while in a register (predict rescans Pn if a sum is not finite)
             lines.append(CheckedAssign((_symmetric("scratch", "Pn", n, True, i, j),), tuple(terms)))
-        blocks.append(KernelBlock(f"propagate_row_{i}", tuple(lines), checked=True, two_lanes=True))
+        if lines:
+            blocks.append(KernelBlock(f"propagate_row_{i}", tuple(lines), checked=True, two_lanes=True))
     return blocks, OperationCount(mul, add)
 
 
@@ -246,6 +280,12 @@ class CommitRow:
     start: int
     length: int
     mirrored: tuple[int, ...]
+    # the copies of the row: (first column, packed index, length); one run from the diagonal unless given
+    runs: tuple[tuple[int, int, int], ...] = ()
+
+    @property
+    def copies(self) -> tuple[tuple[int, int, int], ...]:
+        return self.runs or ((self.row, self.start, self.length),)
 
 
 def covariance_commit(n: int) -> list[CommitRow]:
@@ -259,6 +299,27 @@ def covariance_commit(n: int) -> list[CommitRow]:
     spills (1.5 kB of stack), and 8,696 for a loop over the packed index.
     """
     return [CommitRow(i, packed_index(n, i, i), n - i, tuple(range(i + 1, n))) for i in range(n)]
+
+
+def predict_commit(n: int, kept: list[tuple[int, int]]) -> list[CommitRow]:
+    """:func:`covariance_commit` of the prediction: the :func:`kept_pairs` are neither copied nor mirrored.
+
+    Each row's other entries from the diagonal on are copied as runs of
+    consecutive columns (one block copy each); a row with none is left out.
+    """
+    skip = set(kept)
+    out = []
+    for i in range(n):
+        columns = [j for j in range(i, n) if (i, j) not in skip]
+        runs: list[tuple[int, int, int]] = []
+        for j in columns:
+            if runs and runs[-1][0] + runs[-1][2] == j:
+                runs[-1] = (runs[-1][0], runs[-1][1], runs[-1][2] + 1)
+            else:
+                runs.append((j, packed_index(n, i, j), 1))
+        if runs:
+            out.append(CommitRow(i, packed_index(n, i, i), n - i, tuple(j for j in columns if j > i), tuple(runs)))
+    return out
 
 
 def unrolled_predict_flops(structure: FilterStructure) -> int:
@@ -522,11 +583,21 @@ def update_cost(structure: FilterStructure, options: CodegenOptions | None = Non
 
 
 #: Bytes of generated text per unrolled flop of the covariance prediction (which the unrolled
-#: discretize, Horner's rule over dense row segments of the fill-in of Phi, grows with too), and
-#: the rest (templates, tables, evaluation): least squares of the relative error on the built-in
-#: models, which it predicts within 12 % (ned_doppler18: 318 kB estimated, 312 kB written).
-BYTES_PER_PREDICT_FLOP = 40
-FIXED_BYTES = 130_000
+#: discretize, Horner's rule over dense row segments of the fill-in of Phi, grows with too), per
+#: flop of the rows of M = Phi P printed as loops over column pairs (rows of Phi with two or more
+#: nonzeros: one line per term, not per entry), and the rest (templates, tables, evaluation):
+#: least squares of the relative error on the built-in models, which it predicts within 7 %
+#: (ned_doppler18: 331 kB estimated, 329 kB written; ned_doppler32_augmented: 480 kB, 481 kB).
+BYTES_PER_PREDICT_FLOP = 101
+BYTES_PER_LOOPED_FLOP = 9
+FIXED_BYTES = 197_000
+
+
+def looped_predict_flops(structure: FilterStructure) -> int:
+    """The flops of :func:`unrolled_predict_flops` in the rows of M = Phi P that the C prints as loops (two or more terms)."""
+    n = structure.n_states
+    unit = set(structure.unit_rows)
+    return sum((2 * len(row) - 1) * n for i, row in enumerate(structure.rows("Phi")) if i not in unit and len(row) > 1)
 
 
 #: With compact kernels (large models) the generated text grows with the states (names,
@@ -558,4 +629,5 @@ def estimated_code_bytes(structure: FilterStructure) -> int:
             + COMPACT_BYTES_PER_MATRIX_NONZERO * matrix_nonzeros
             + COMPACT_BYTES_PER_PHI_NONZERO * int(structure.Phi.sum())
         )
-    return FIXED_BYTES + BYTES_PER_PREDICT_FLOP * unrolled_predict_flops(structure)
+    looped = looped_predict_flops(structure)
+    return FIXED_BYTES + BYTES_PER_PREDICT_FLOP * (unrolled_predict_flops(structure) - looped) + BYTES_PER_LOOPED_FLOP * looped

@@ -5,7 +5,8 @@ operations of the unrolled prediction, so every ``*`` and every ``+`` in the
 right-hand sides of its straight-line statements is counted: the state lines
 ``w->xn[i] = ...`` of ``<model>_predict`` and the statements of the static
 kernel functions it calls (``phi_times_p_row_*``, ``propagate_row_*``,
-``phi_times_u_row_*``).  The finiteness probes (``check += v - v``) and the
+``phi_times_u_row_*``); a row of M = Phi P printed as a loop over column pairs
+counts its body once per pair.  The finiteness probes (``check += v - v``) and the
 stores of a computed value (``... = v``) are not arithmetic of the filter and
 are not counted.  In the UD form the Thornton sweep is a loop, not unrolled
 text: its share is :func:`~modelgen.codegen.kernels.thornton_cost`, and the
@@ -44,15 +45,30 @@ def _count(statements: list[str]) -> tuple[int, int]:
     return mul, add
 
 
+PAIR_LOOP = re.compile(r"for \(c = 0; c \+ 1 < (\d+); c \+= 2\) \{\n(.*?)\n    \}\n", re.S)
+
+
+def _kernel_count(body: str) -> tuple[int, int]:
+    """A kernel's count: its straight-line statements, a loop over column pairs (a row of M = Phi P) once per pair."""
+    mul, add = 0, 0
+    for trips, loop in PAIR_LOOP.findall(body):
+        m, a = _count(loop.split(";"))
+        mul, add = mul + m * (int(trips) // 2), add + a * (int(trips) // 2)
+    m, a = _count(PAIR_LOOP.sub("", body).split(";"))
+    return mul + m, add + a
+
+
 def emitted_predict_count(source: str, model: str) -> tuple[int, int]:
     """Multiplications and additions written out in the predict of one generated C source."""
-    statements = [s for _, body in KERNEL.findall(source) for s in body.split(";")]
+    kernels = [_kernel_count(body + "\n") for _, body in KERNEL.findall(source)]
+    statements = []
     predict = source[source.index(f"int {model}_predict(") :]
     predict = predict[: predict.index("\n}\n")]
     predict = re.sub(r"/\*.*?\*/", "", predict, flags=re.S)  # a comment may precede the first statement
     # x_n = Phi x inline (UD); a statement may follow the closing brace of a loop before it
     statements += [t for s in predict.split(";") if (t := s.lstrip("{} \n\t")).startswith(("w->xn[", "acc = "))]
-    return _count(statements)
+    mul, add = _count(statements)
+    return mul + sum(m for m, _ in kernels), add + sum(a for _, a in kernels)
 
 
 def printed_predict_count(header: str) -> tuple[int, int]:

@@ -946,26 +946,75 @@ NED_DOPPLER18_BLOCK void horner_last_into_S(ned_doppler18_discretize_scratch *re
 
 NED_DOPPLER18_BLOCK void horner_unit_columns(ned_doppler18_discretize_scratch *restrict w)
 {
-    w->S[90] = w->term[1][0]*w->fh[4] + w->term[1][1]*w->fh[13] + w->term[1][2]*w->fh[23];
-    w->S[91] = w->term[1][0]*w->fh[5] + w->term[1][1]*w->fh[14] + w->term[1][2]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[90], pair);
+    }
     w->S[92] = w->term[1][0]*w->fh[6] + w->term[1][1]*w->fh[15] + w->term[1][2]*w->fh[25];
-    w->S[93] = w->term[1][12]*w->fh[4] + w->term[1][13]*w->fh[13] + w->term[1][14]*w->fh[23];
-    w->S[94] = w->term[1][12]*w->fh[5] + w->term[1][13]*w->fh[14] + w->term[1][14]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][12], w->term[1][12]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][14], w->term[1][14]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[93], pair);
+    }
     w->S[95] = w->term[1][12]*w->fh[6] + w->term[1][13]*w->fh[15] + w->term[1][14]*w->fh[25];
-    w->S[96] = w->term[1][24]*w->fh[4] + w->term[1][25]*w->fh[13] + w->term[1][26]*w->fh[23];
-    w->S[97] = w->term[1][24]*w->fh[5] + w->term[1][25]*w->fh[14] + w->term[1][26]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[96], pair);
+    }
     w->S[98] = w->term[1][24]*w->fh[6] + w->term[1][25]*w->fh[15] + w->term[1][26]*w->fh[25];
-    w->S[99] = w->term[1][36]*w->fh[4] + w->term[1][37]*w->fh[13] + w->term[1][38]*w->fh[23];
-    w->S[100] = w->term[1][36]*w->fh[5] + w->term[1][37]*w->fh[14] + w->term[1][38]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][36], w->term[1][36]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][38], w->term[1][38]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[99], pair);
+    }
     w->S[101] = w->term[1][36]*w->fh[6] + w->term[1][37]*w->fh[15] + w->term[1][38]*w->fh[25];
-    w->S[102] = w->term[1][48]*w->fh[4] + w->term[1][49]*w->fh[13] + w->term[1][50]*w->fh[23];
-    w->S[103] = w->term[1][48]*w->fh[5] + w->term[1][49]*w->fh[14] + w->term[1][50]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[102], pair);
+    }
     w->S[104] = w->term[1][48]*w->fh[6] + w->term[1][49]*w->fh[15] + w->term[1][50]*w->fh[25];
-    w->S[105] = w->term[1][60]*w->fh[4] + w->term[1][61]*w->fh[13] + w->term[1][62]*w->fh[23];
-    w->S[106] = w->term[1][60]*w->fh[5] + w->term[1][61]*w->fh[14] + w->term[1][62]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][60], w->term[1][60]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][62], w->term[1][62]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[105], pair);
+    }
     w->S[107] = w->term[1][60]*w->fh[6] + w->term[1][61]*w->fh[15] + w->term[1][62]*w->fh[25];
-    w->S[109] = w->term[1][72]*w->fh[4] + w->term[1][73]*w->fh[13] + w->term[1][74]*w->fh[23];
-    w->S[110] = w->term[1][72]*w->fh[5] + w->term[1][73]*w->fh[14] + w->term[1][74]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][72], w->term[1][72]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][73], w->term[1][73]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][74], w->term[1][74]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[109], pair);
+    }
     w->S[111] = w->term[1][72]*w->fh[6] + w->term[1][73]*w->fh[15] + w->term[1][74]*w->fh[25];
 }
 
@@ -1019,26 +1068,75 @@ NED_DOPPLER18_BLOCK void horner_transition(ned_doppler18_transition *restrict t,
     t->Phi[112] = w->fh[51]*w->S[87];
     t->Phi[113] = w->fh[52]*w->S[88];
     t->Phi[114] = w->fh[53]*w->S[89];
-    t->Phi[6] = w->S[0]*w->fh[4] + w->S[1]*w->fh[13] + w->S[2]*w->fh[23];
-    t->Phi[7] = w->S[0]*w->fh[5] + w->S[1]*w->fh[14] + w->S[2]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[6], pair);
+    }
     t->Phi[8] = w->S[0]*w->fh[6] + w->S[1]*w->fh[15] + w->S[2]*w->fh[25];
-    t->Phi[21] = w->S[12]*w->fh[4] + w->S[13]*w->fh[13] + w->S[14]*w->fh[23];
-    t->Phi[22] = w->S[12]*w->fh[5] + w->S[13]*w->fh[14] + w->S[14]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[12], w->S[12]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[14], w->S[14]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[21], pair);
+    }
     t->Phi[23] = w->S[12]*w->fh[6] + w->S[13]*w->fh[15] + w->S[14]*w->fh[25];
-    t->Phi[36] = w->S[24]*w->fh[4] + w->S[25]*w->fh[13] + w->S[26]*w->fh[23];
-    t->Phi[37] = w->S[24]*w->fh[5] + w->S[25]*w->fh[14] + w->S[26]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[36], pair);
+    }
     t->Phi[38] = w->S[24]*w->fh[6] + w->S[25]*w->fh[15] + w->S[26]*w->fh[25];
-    t->Phi[51] = w->S[36]*w->fh[4] + w->S[37]*w->fh[13] + w->S[38]*w->fh[23];
-    t->Phi[52] = w->S[36]*w->fh[5] + w->S[37]*w->fh[14] + w->S[38]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[36], w->S[36]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[38], w->S[38]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[51], pair);
+    }
     t->Phi[53] = w->S[36]*w->fh[6] + w->S[37]*w->fh[15] + w->S[38]*w->fh[25];
-    t->Phi[66] = w->S[48]*w->fh[4] + w->S[49]*w->fh[13] + w->S[50]*w->fh[23];
-    t->Phi[67] = w->S[48]*w->fh[5] + w->S[49]*w->fh[14] + w->S[50]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[66], pair);
+    }
     t->Phi[68] = w->S[48]*w->fh[6] + w->S[49]*w->fh[15] + w->S[50]*w->fh[25];
-    t->Phi[81] = w->S[60]*w->fh[4] + w->S[61]*w->fh[13] + w->S[62]*w->fh[23];
-    t->Phi[82] = w->S[60]*w->fh[5] + w->S[61]*w->fh[14] + w->S[62]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[60], w->S[60]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[62], w->S[62]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[81], pair);
+    }
     t->Phi[83] = w->S[60]*w->fh[6] + w->S[61]*w->fh[15] + w->S[62]*w->fh[25];
-    t->Phi[97] = w->S[72]*w->fh[4] + w->S[73]*w->fh[13] + w->S[74]*w->fh[23];
-    t->Phi[98] = w->S[72]*w->fh[5] + w->S[73]*w->fh[14] + w->S[74]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[97], pair);
+    }
     t->Phi[99] = w->S[72]*w->fh[6] + w->S[73]*w->fh[15] + w->S[74]*w->fh[25];
     t->Phi[96] = 0;
     t->Phi[106] = one;
@@ -1654,12 +1752,18 @@ NED_DOPPLER18_BLOCK void process_noise(const ned_doppler18_matrices *restrict m,
         ned_doppler18_transition *restrict t, ned_doppler18_discretize_scratch *restrict w, const
         ned_doppler18_scalar T)
 {
-    w->term[1][48] = T*m->q[0];
-    w->term[1][49] = T*m->q[1];
-    w->term[1][50] = T*m->q[2];
-    w->term[1][51] = T*m->q[3];
-    w->term[1][52] = T*m->q[4];
-    w->term[1][53] = T*m->q[5];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[0]));
+        lane_pair_store(&w->term[1][48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[2]));
+        lane_pair_store(&w->term[1][50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[4]));
+        lane_pair_store(&w->term[1][52], pair);
+    }
     w->term[1][0] = w->term[0][0]*w->term[1][48];
     w->term[1][1] = w->term[0][1]*w->term[1][49];
     w->term[1][2] = w->term[0][2]*w->term[1][50];
@@ -2457,96 +2561,41 @@ NED_DOPPLER18_BLOCK void state_predict(const ned_doppler18_filter *restrict f, c
 NED_DOPPLER18_BLOCK void phi_times_p_row_0(const ned_doppler18_filter *restrict f, const
         ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[0]*f->P[0][0] + t->Phi[1]*f->P[1][0] + t->Phi[2]*f->P[2][0] +
-            t->Phi[3]*f->P[3][0] + t->Phi[4]*f->P[4][0] + t->Phi[5]*f->P[5][0] +
-            t->Phi[6]*f->P[7][0] + t->Phi[7]*f->P[8][0] + t->Phi[8]*f->P[9][0] +
-            t->Phi[9]*f->P[10][0] + t->Phi[10]*f->P[11][0] + t->Phi[11]*f->P[12][0] +
-            t->Phi[12]*f->P[13][0] + t->Phi[13]*f->P[14][0] + t->Phi[14]*f->P[15][0];
-    w->M[1] = t->Phi[0]*f->P[0][1] + t->Phi[1]*f->P[1][1] + t->Phi[2]*f->P[2][1] +
-            t->Phi[3]*f->P[3][1] + t->Phi[4]*f->P[4][1] + t->Phi[5]*f->P[5][1] +
-            t->Phi[6]*f->P[7][1] + t->Phi[7]*f->P[8][1] + t->Phi[8]*f->P[9][1] +
-            t->Phi[9]*f->P[10][1] + t->Phi[10]*f->P[11][1] + t->Phi[11]*f->P[12][1] +
-            t->Phi[12]*f->P[13][1] + t->Phi[13]*f->P[14][1] + t->Phi[14]*f->P[15][1];
-    w->M[2] = t->Phi[0]*f->P[0][2] + t->Phi[1]*f->P[1][2] + t->Phi[2]*f->P[2][2] +
-            t->Phi[3]*f->P[3][2] + t->Phi[4]*f->P[4][2] + t->Phi[5]*f->P[5][2] +
-            t->Phi[6]*f->P[7][2] + t->Phi[7]*f->P[8][2] + t->Phi[8]*f->P[9][2] +
-            t->Phi[9]*f->P[10][2] + t->Phi[10]*f->P[11][2] + t->Phi[11]*f->P[12][2] +
-            t->Phi[12]*f->P[13][2] + t->Phi[13]*f->P[14][2] + t->Phi[14]*f->P[15][2];
-    w->M[3] = t->Phi[0]*f->P[0][3] + t->Phi[1]*f->P[1][3] + t->Phi[2]*f->P[2][3] +
-            t->Phi[3]*f->P[3][3] + t->Phi[4]*f->P[4][3] + t->Phi[5]*f->P[5][3] +
-            t->Phi[6]*f->P[7][3] + t->Phi[7]*f->P[8][3] + t->Phi[8]*f->P[9][3] +
-            t->Phi[9]*f->P[10][3] + t->Phi[10]*f->P[11][3] + t->Phi[11]*f->P[12][3] +
-            t->Phi[12]*f->P[13][3] + t->Phi[13]*f->P[14][3] + t->Phi[14]*f->P[15][3];
-    w->M[4] = t->Phi[0]*f->P[0][4] + t->Phi[1]*f->P[1][4] + t->Phi[2]*f->P[2][4] +
-            t->Phi[3]*f->P[3][4] + t->Phi[4]*f->P[4][4] + t->Phi[5]*f->P[5][4] +
-            t->Phi[6]*f->P[7][4] + t->Phi[7]*f->P[8][4] + t->Phi[8]*f->P[9][4] +
-            t->Phi[9]*f->P[10][4] + t->Phi[10]*f->P[11][4] + t->Phi[11]*f->P[12][4] +
-            t->Phi[12]*f->P[13][4] + t->Phi[13]*f->P[14][4] + t->Phi[14]*f->P[15][4];
-    w->M[5] = t->Phi[0]*f->P[0][5] + t->Phi[1]*f->P[1][5] + t->Phi[2]*f->P[2][5] +
-            t->Phi[3]*f->P[3][5] + t->Phi[4]*f->P[4][5] + t->Phi[5]*f->P[5][5] +
-            t->Phi[6]*f->P[7][5] + t->Phi[7]*f->P[8][5] + t->Phi[8]*f->P[9][5] +
-            t->Phi[9]*f->P[10][5] + t->Phi[10]*f->P[11][5] + t->Phi[11]*f->P[12][5] +
-            t->Phi[12]*f->P[13][5] + t->Phi[13]*f->P[14][5] + t->Phi[14]*f->P[15][5];
-    w->M[6] = t->Phi[0]*f->P[0][6] + t->Phi[1]*f->P[1][6] + t->Phi[2]*f->P[2][6] +
-            t->Phi[3]*f->P[3][6] + t->Phi[4]*f->P[4][6] + t->Phi[5]*f->P[5][6] +
-            t->Phi[6]*f->P[7][6] + t->Phi[7]*f->P[8][6] + t->Phi[8]*f->P[9][6] +
-            t->Phi[9]*f->P[10][6] + t->Phi[10]*f->P[11][6] + t->Phi[11]*f->P[12][6] +
-            t->Phi[12]*f->P[13][6] + t->Phi[13]*f->P[14][6] + t->Phi[14]*f->P[15][6];
-    w->M[7] = t->Phi[0]*f->P[0][7] + t->Phi[1]*f->P[1][7] + t->Phi[2]*f->P[2][7] +
-            t->Phi[3]*f->P[3][7] + t->Phi[4]*f->P[4][7] + t->Phi[5]*f->P[5][7] +
-            t->Phi[6]*f->P[7][7] + t->Phi[7]*f->P[8][7] + t->Phi[8]*f->P[9][7] +
-            t->Phi[9]*f->P[10][7] + t->Phi[10]*f->P[11][7] + t->Phi[11]*f->P[12][7] +
-            t->Phi[12]*f->P[13][7] + t->Phi[13]*f->P[14][7] + t->Phi[14]*f->P[15][7];
-    w->M[8] = t->Phi[0]*f->P[0][8] + t->Phi[1]*f->P[1][8] + t->Phi[2]*f->P[2][8] +
-            t->Phi[3]*f->P[3][8] + t->Phi[4]*f->P[4][8] + t->Phi[5]*f->P[5][8] +
-            t->Phi[6]*f->P[7][8] + t->Phi[7]*f->P[8][8] + t->Phi[8]*f->P[9][8] +
-            t->Phi[9]*f->P[10][8] + t->Phi[10]*f->P[11][8] + t->Phi[11]*f->P[12][8] +
-            t->Phi[12]*f->P[13][8] + t->Phi[13]*f->P[14][8] + t->Phi[14]*f->P[15][8];
-    w->M[9] = t->Phi[0]*f->P[0][9] + t->Phi[1]*f->P[1][9] + t->Phi[2]*f->P[2][9] +
-            t->Phi[3]*f->P[3][9] + t->Phi[4]*f->P[4][9] + t->Phi[5]*f->P[5][9] +
-            t->Phi[6]*f->P[7][9] + t->Phi[7]*f->P[8][9] + t->Phi[8]*f->P[9][9] +
-            t->Phi[9]*f->P[10][9] + t->Phi[10]*f->P[11][9] + t->Phi[11]*f->P[12][9] +
-            t->Phi[12]*f->P[13][9] + t->Phi[13]*f->P[14][9] + t->Phi[14]*f->P[15][9];
-    w->M[10] = t->Phi[0]*f->P[0][10] + t->Phi[1]*f->P[1][10] + t->Phi[2]*f->P[2][10] +
-            t->Phi[3]*f->P[3][10] + t->Phi[4]*f->P[4][10] + t->Phi[5]*f->P[5][10] +
-            t->Phi[6]*f->P[7][10] + t->Phi[7]*f->P[8][10] + t->Phi[8]*f->P[9][10] +
-            t->Phi[9]*f->P[10][10] + t->Phi[10]*f->P[11][10] + t->Phi[11]*f->P[12][10] +
-            t->Phi[12]*f->P[13][10] + t->Phi[13]*f->P[14][10] + t->Phi[14]*f->P[15][10];
-    w->M[11] = t->Phi[0]*f->P[0][11] + t->Phi[1]*f->P[1][11] + t->Phi[2]*f->P[2][11] +
-            t->Phi[3]*f->P[3][11] + t->Phi[4]*f->P[4][11] + t->Phi[5]*f->P[5][11] +
-            t->Phi[6]*f->P[7][11] + t->Phi[7]*f->P[8][11] + t->Phi[8]*f->P[9][11] +
-            t->Phi[9]*f->P[10][11] + t->Phi[10]*f->P[11][11] + t->Phi[11]*f->P[12][11] +
-            t->Phi[12]*f->P[13][11] + t->Phi[13]*f->P[14][11] + t->Phi[14]*f->P[15][11];
-    w->M[12] = t->Phi[0]*f->P[0][12] + t->Phi[1]*f->P[1][12] + t->Phi[2]*f->P[2][12] +
-            t->Phi[3]*f->P[3][12] + t->Phi[4]*f->P[4][12] + t->Phi[5]*f->P[5][12] +
-            t->Phi[6]*f->P[7][12] + t->Phi[7]*f->P[8][12] + t->Phi[8]*f->P[9][12] +
-            t->Phi[9]*f->P[10][12] + t->Phi[10]*f->P[11][12] + t->Phi[11]*f->P[12][12] +
-            t->Phi[12]*f->P[13][12] + t->Phi[13]*f->P[14][12] + t->Phi[14]*f->P[15][12];
-    w->M[13] = t->Phi[0]*f->P[0][13] + t->Phi[1]*f->P[1][13] + t->Phi[2]*f->P[2][13] +
-            t->Phi[3]*f->P[3][13] + t->Phi[4]*f->P[4][13] + t->Phi[5]*f->P[5][13] +
-            t->Phi[6]*f->P[7][13] + t->Phi[7]*f->P[8][13] + t->Phi[8]*f->P[9][13] +
-            t->Phi[9]*f->P[10][13] + t->Phi[10]*f->P[11][13] + t->Phi[11]*f->P[12][13] +
-            t->Phi[12]*f->P[13][13] + t->Phi[13]*f->P[14][13] + t->Phi[14]*f->P[15][13];
-    w->M[14] = t->Phi[0]*f->P[0][14] + t->Phi[1]*f->P[1][14] + t->Phi[2]*f->P[2][14] +
-            t->Phi[3]*f->P[3][14] + t->Phi[4]*f->P[4][14] + t->Phi[5]*f->P[5][14] +
-            t->Phi[6]*f->P[7][14] + t->Phi[7]*f->P[8][14] + t->Phi[8]*f->P[9][14] +
-            t->Phi[9]*f->P[10][14] + t->Phi[10]*f->P[11][14] + t->Phi[11]*f->P[12][14] +
-            t->Phi[12]*f->P[13][14] + t->Phi[13]*f->P[14][14] + t->Phi[14]*f->P[15][14];
-    w->M[15] = t->Phi[0]*f->P[0][15] + t->Phi[1]*f->P[1][15] + t->Phi[2]*f->P[2][15] +
-            t->Phi[3]*f->P[3][15] + t->Phi[4]*f->P[4][15] + t->Phi[5]*f->P[5][15] +
-            t->Phi[6]*f->P[7][15] + t->Phi[7]*f->P[8][15] + t->Phi[8]*f->P[9][15] +
-            t->Phi[9]*f->P[10][15] + t->Phi[10]*f->P[11][15] + t->Phi[11]*f->P[12][15] +
-            t->Phi[12]*f->P[13][15] + t->Phi[13]*f->P[14][15] + t->Phi[14]*f->P[15][15];
-    w->M[16] = t->Phi[0]*f->P[0][16] + t->Phi[1]*f->P[1][16] + t->Phi[2]*f->P[2][16] +
-            t->Phi[3]*f->P[3][16] + t->Phi[4]*f->P[4][16] + t->Phi[5]*f->P[5][16] +
-            t->Phi[6]*f->P[7][16] + t->Phi[7]*f->P[8][16] + t->Phi[8]*f->P[9][16] +
-            t->Phi[9]*f->P[10][16] + t->Phi[10]*f->P[11][16] + t->Phi[11]*f->P[12][16] +
-            t->Phi[12]*f->P[13][16] + t->Phi[13]*f->P[14][16] + t->Phi[14]*f->P[15][16];
-    w->M[17] = t->Phi[0]*f->P[0][17] + t->Phi[1]*f->P[1][17] + t->Phi[2]*f->P[2][17] +
-            t->Phi[3]*f->P[3][17] + t->Phi[4]*f->P[4][17] + t->Phi[5]*f->P[5][17] +
-            t->Phi[6]*f->P[7][17] + t->Phi[7]*f->P[8][17] + t->Phi[8]*f->P[9][17] +
-            t->Phi[9]*f->P[10][17] + t->Phi[10]*f->P[11][17] + t->Phi[11]*f->P[12][17] +
-            t->Phi[12]*f->P[13][17] + t->Phi[13]*f->P[14][17] + t->Phi[14]*f->P[15][17];
+    int c;
+    lane_pair b[15];
+    b[0] = lane_pair_of(t->Phi[0], t->Phi[0]);
+    b[1] = lane_pair_of(t->Phi[1], t->Phi[1]);
+    b[2] = lane_pair_of(t->Phi[2], t->Phi[2]);
+    b[3] = lane_pair_of(t->Phi[3], t->Phi[3]);
+    b[4] = lane_pair_of(t->Phi[4], t->Phi[4]);
+    b[5] = lane_pair_of(t->Phi[5], t->Phi[5]);
+    b[6] = lane_pair_of(t->Phi[6], t->Phi[6]);
+    b[7] = lane_pair_of(t->Phi[7], t->Phi[7]);
+    b[8] = lane_pair_of(t->Phi[8], t->Phi[8]);
+    b[9] = lane_pair_of(t->Phi[9], t->Phi[9]);
+    b[10] = lane_pair_of(t->Phi[10], t->Phi[10]);
+    b[11] = lane_pair_of(t->Phi[11], t->Phi[11]);
+    b[12] = lane_pair_of(t->Phi[12], t->Phi[12]);
+    b[13] = lane_pair_of(t->Phi[13], t->Phi[13]);
+    b[14] = lane_pair_of(t->Phi[14], t->Phi[14]);
+    for (c = 0; c + 1 < 18; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[15][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -2630,96 +2679,41 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_0(const ned_doppler18_tra
 NED_DOPPLER18_BLOCK void phi_times_p_row_1(const ned_doppler18_filter *restrict f, const
         ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[15]*f->P[0][0] + t->Phi[16]*f->P[1][0] + t->Phi[17]*f->P[2][0] +
-            t->Phi[18]*f->P[3][0] + t->Phi[19]*f->P[4][0] + t->Phi[20]*f->P[5][0] +
-            t->Phi[21]*f->P[7][0] + t->Phi[22]*f->P[8][0] + t->Phi[23]*f->P[9][0] +
-            t->Phi[24]*f->P[10][0] + t->Phi[25]*f->P[11][0] + t->Phi[26]*f->P[12][0] +
-            t->Phi[27]*f->P[13][0] + t->Phi[28]*f->P[14][0] + t->Phi[29]*f->P[15][0];
-    w->M[1] = t->Phi[15]*f->P[0][1] + t->Phi[16]*f->P[1][1] + t->Phi[17]*f->P[2][1] +
-            t->Phi[18]*f->P[3][1] + t->Phi[19]*f->P[4][1] + t->Phi[20]*f->P[5][1] +
-            t->Phi[21]*f->P[7][1] + t->Phi[22]*f->P[8][1] + t->Phi[23]*f->P[9][1] +
-            t->Phi[24]*f->P[10][1] + t->Phi[25]*f->P[11][1] + t->Phi[26]*f->P[12][1] +
-            t->Phi[27]*f->P[13][1] + t->Phi[28]*f->P[14][1] + t->Phi[29]*f->P[15][1];
-    w->M[2] = t->Phi[15]*f->P[0][2] + t->Phi[16]*f->P[1][2] + t->Phi[17]*f->P[2][2] +
-            t->Phi[18]*f->P[3][2] + t->Phi[19]*f->P[4][2] + t->Phi[20]*f->P[5][2] +
-            t->Phi[21]*f->P[7][2] + t->Phi[22]*f->P[8][2] + t->Phi[23]*f->P[9][2] +
-            t->Phi[24]*f->P[10][2] + t->Phi[25]*f->P[11][2] + t->Phi[26]*f->P[12][2] +
-            t->Phi[27]*f->P[13][2] + t->Phi[28]*f->P[14][2] + t->Phi[29]*f->P[15][2];
-    w->M[3] = t->Phi[15]*f->P[0][3] + t->Phi[16]*f->P[1][3] + t->Phi[17]*f->P[2][3] +
-            t->Phi[18]*f->P[3][3] + t->Phi[19]*f->P[4][3] + t->Phi[20]*f->P[5][3] +
-            t->Phi[21]*f->P[7][3] + t->Phi[22]*f->P[8][3] + t->Phi[23]*f->P[9][3] +
-            t->Phi[24]*f->P[10][3] + t->Phi[25]*f->P[11][3] + t->Phi[26]*f->P[12][3] +
-            t->Phi[27]*f->P[13][3] + t->Phi[28]*f->P[14][3] + t->Phi[29]*f->P[15][3];
-    w->M[4] = t->Phi[15]*f->P[0][4] + t->Phi[16]*f->P[1][4] + t->Phi[17]*f->P[2][4] +
-            t->Phi[18]*f->P[3][4] + t->Phi[19]*f->P[4][4] + t->Phi[20]*f->P[5][4] +
-            t->Phi[21]*f->P[7][4] + t->Phi[22]*f->P[8][4] + t->Phi[23]*f->P[9][4] +
-            t->Phi[24]*f->P[10][4] + t->Phi[25]*f->P[11][4] + t->Phi[26]*f->P[12][4] +
-            t->Phi[27]*f->P[13][4] + t->Phi[28]*f->P[14][4] + t->Phi[29]*f->P[15][4];
-    w->M[5] = t->Phi[15]*f->P[0][5] + t->Phi[16]*f->P[1][5] + t->Phi[17]*f->P[2][5] +
-            t->Phi[18]*f->P[3][5] + t->Phi[19]*f->P[4][5] + t->Phi[20]*f->P[5][5] +
-            t->Phi[21]*f->P[7][5] + t->Phi[22]*f->P[8][5] + t->Phi[23]*f->P[9][5] +
-            t->Phi[24]*f->P[10][5] + t->Phi[25]*f->P[11][5] + t->Phi[26]*f->P[12][5] +
-            t->Phi[27]*f->P[13][5] + t->Phi[28]*f->P[14][5] + t->Phi[29]*f->P[15][5];
-    w->M[6] = t->Phi[15]*f->P[0][6] + t->Phi[16]*f->P[1][6] + t->Phi[17]*f->P[2][6] +
-            t->Phi[18]*f->P[3][6] + t->Phi[19]*f->P[4][6] + t->Phi[20]*f->P[5][6] +
-            t->Phi[21]*f->P[7][6] + t->Phi[22]*f->P[8][6] + t->Phi[23]*f->P[9][6] +
-            t->Phi[24]*f->P[10][6] + t->Phi[25]*f->P[11][6] + t->Phi[26]*f->P[12][6] +
-            t->Phi[27]*f->P[13][6] + t->Phi[28]*f->P[14][6] + t->Phi[29]*f->P[15][6];
-    w->M[7] = t->Phi[15]*f->P[0][7] + t->Phi[16]*f->P[1][7] + t->Phi[17]*f->P[2][7] +
-            t->Phi[18]*f->P[3][7] + t->Phi[19]*f->P[4][7] + t->Phi[20]*f->P[5][7] +
-            t->Phi[21]*f->P[7][7] + t->Phi[22]*f->P[8][7] + t->Phi[23]*f->P[9][7] +
-            t->Phi[24]*f->P[10][7] + t->Phi[25]*f->P[11][7] + t->Phi[26]*f->P[12][7] +
-            t->Phi[27]*f->P[13][7] + t->Phi[28]*f->P[14][7] + t->Phi[29]*f->P[15][7];
-    w->M[8] = t->Phi[15]*f->P[0][8] + t->Phi[16]*f->P[1][8] + t->Phi[17]*f->P[2][8] +
-            t->Phi[18]*f->P[3][8] + t->Phi[19]*f->P[4][8] + t->Phi[20]*f->P[5][8] +
-            t->Phi[21]*f->P[7][8] + t->Phi[22]*f->P[8][8] + t->Phi[23]*f->P[9][8] +
-            t->Phi[24]*f->P[10][8] + t->Phi[25]*f->P[11][8] + t->Phi[26]*f->P[12][8] +
-            t->Phi[27]*f->P[13][8] + t->Phi[28]*f->P[14][8] + t->Phi[29]*f->P[15][8];
-    w->M[9] = t->Phi[15]*f->P[0][9] + t->Phi[16]*f->P[1][9] + t->Phi[17]*f->P[2][9] +
-            t->Phi[18]*f->P[3][9] + t->Phi[19]*f->P[4][9] + t->Phi[20]*f->P[5][9] +
-            t->Phi[21]*f->P[7][9] + t->Phi[22]*f->P[8][9] + t->Phi[23]*f->P[9][9] +
-            t->Phi[24]*f->P[10][9] + t->Phi[25]*f->P[11][9] + t->Phi[26]*f->P[12][9] +
-            t->Phi[27]*f->P[13][9] + t->Phi[28]*f->P[14][9] + t->Phi[29]*f->P[15][9];
-    w->M[10] = t->Phi[15]*f->P[0][10] + t->Phi[16]*f->P[1][10] + t->Phi[17]*f->P[2][10] +
-            t->Phi[18]*f->P[3][10] + t->Phi[19]*f->P[4][10] + t->Phi[20]*f->P[5][10] +
-            t->Phi[21]*f->P[7][10] + t->Phi[22]*f->P[8][10] + t->Phi[23]*f->P[9][10] +
-            t->Phi[24]*f->P[10][10] + t->Phi[25]*f->P[11][10] + t->Phi[26]*f->P[12][10] +
-            t->Phi[27]*f->P[13][10] + t->Phi[28]*f->P[14][10] + t->Phi[29]*f->P[15][10];
-    w->M[11] = t->Phi[15]*f->P[0][11] + t->Phi[16]*f->P[1][11] + t->Phi[17]*f->P[2][11] +
-            t->Phi[18]*f->P[3][11] + t->Phi[19]*f->P[4][11] + t->Phi[20]*f->P[5][11] +
-            t->Phi[21]*f->P[7][11] + t->Phi[22]*f->P[8][11] + t->Phi[23]*f->P[9][11] +
-            t->Phi[24]*f->P[10][11] + t->Phi[25]*f->P[11][11] + t->Phi[26]*f->P[12][11] +
-            t->Phi[27]*f->P[13][11] + t->Phi[28]*f->P[14][11] + t->Phi[29]*f->P[15][11];
-    w->M[12] = t->Phi[15]*f->P[0][12] + t->Phi[16]*f->P[1][12] + t->Phi[17]*f->P[2][12] +
-            t->Phi[18]*f->P[3][12] + t->Phi[19]*f->P[4][12] + t->Phi[20]*f->P[5][12] +
-            t->Phi[21]*f->P[7][12] + t->Phi[22]*f->P[8][12] + t->Phi[23]*f->P[9][12] +
-            t->Phi[24]*f->P[10][12] + t->Phi[25]*f->P[11][12] + t->Phi[26]*f->P[12][12] +
-            t->Phi[27]*f->P[13][12] + t->Phi[28]*f->P[14][12] + t->Phi[29]*f->P[15][12];
-    w->M[13] = t->Phi[15]*f->P[0][13] + t->Phi[16]*f->P[1][13] + t->Phi[17]*f->P[2][13] +
-            t->Phi[18]*f->P[3][13] + t->Phi[19]*f->P[4][13] + t->Phi[20]*f->P[5][13] +
-            t->Phi[21]*f->P[7][13] + t->Phi[22]*f->P[8][13] + t->Phi[23]*f->P[9][13] +
-            t->Phi[24]*f->P[10][13] + t->Phi[25]*f->P[11][13] + t->Phi[26]*f->P[12][13] +
-            t->Phi[27]*f->P[13][13] + t->Phi[28]*f->P[14][13] + t->Phi[29]*f->P[15][13];
-    w->M[14] = t->Phi[15]*f->P[0][14] + t->Phi[16]*f->P[1][14] + t->Phi[17]*f->P[2][14] +
-            t->Phi[18]*f->P[3][14] + t->Phi[19]*f->P[4][14] + t->Phi[20]*f->P[5][14] +
-            t->Phi[21]*f->P[7][14] + t->Phi[22]*f->P[8][14] + t->Phi[23]*f->P[9][14] +
-            t->Phi[24]*f->P[10][14] + t->Phi[25]*f->P[11][14] + t->Phi[26]*f->P[12][14] +
-            t->Phi[27]*f->P[13][14] + t->Phi[28]*f->P[14][14] + t->Phi[29]*f->P[15][14];
-    w->M[15] = t->Phi[15]*f->P[0][15] + t->Phi[16]*f->P[1][15] + t->Phi[17]*f->P[2][15] +
-            t->Phi[18]*f->P[3][15] + t->Phi[19]*f->P[4][15] + t->Phi[20]*f->P[5][15] +
-            t->Phi[21]*f->P[7][15] + t->Phi[22]*f->P[8][15] + t->Phi[23]*f->P[9][15] +
-            t->Phi[24]*f->P[10][15] + t->Phi[25]*f->P[11][15] + t->Phi[26]*f->P[12][15] +
-            t->Phi[27]*f->P[13][15] + t->Phi[28]*f->P[14][15] + t->Phi[29]*f->P[15][15];
-    w->M[16] = t->Phi[15]*f->P[0][16] + t->Phi[16]*f->P[1][16] + t->Phi[17]*f->P[2][16] +
-            t->Phi[18]*f->P[3][16] + t->Phi[19]*f->P[4][16] + t->Phi[20]*f->P[5][16] +
-            t->Phi[21]*f->P[7][16] + t->Phi[22]*f->P[8][16] + t->Phi[23]*f->P[9][16] +
-            t->Phi[24]*f->P[10][16] + t->Phi[25]*f->P[11][16] + t->Phi[26]*f->P[12][16] +
-            t->Phi[27]*f->P[13][16] + t->Phi[28]*f->P[14][16] + t->Phi[29]*f->P[15][16];
-    w->M[17] = t->Phi[15]*f->P[0][17] + t->Phi[16]*f->P[1][17] + t->Phi[17]*f->P[2][17] +
-            t->Phi[18]*f->P[3][17] + t->Phi[19]*f->P[4][17] + t->Phi[20]*f->P[5][17] +
-            t->Phi[21]*f->P[7][17] + t->Phi[22]*f->P[8][17] + t->Phi[23]*f->P[9][17] +
-            t->Phi[24]*f->P[10][17] + t->Phi[25]*f->P[11][17] + t->Phi[26]*f->P[12][17] +
-            t->Phi[27]*f->P[13][17] + t->Phi[28]*f->P[14][17] + t->Phi[29]*f->P[15][17];
+    int c;
+    lane_pair b[15];
+    b[0] = lane_pair_of(t->Phi[15], t->Phi[15]);
+    b[1] = lane_pair_of(t->Phi[16], t->Phi[16]);
+    b[2] = lane_pair_of(t->Phi[17], t->Phi[17]);
+    b[3] = lane_pair_of(t->Phi[18], t->Phi[18]);
+    b[4] = lane_pair_of(t->Phi[19], t->Phi[19]);
+    b[5] = lane_pair_of(t->Phi[20], t->Phi[20]);
+    b[6] = lane_pair_of(t->Phi[21], t->Phi[21]);
+    b[7] = lane_pair_of(t->Phi[22], t->Phi[22]);
+    b[8] = lane_pair_of(t->Phi[23], t->Phi[23]);
+    b[9] = lane_pair_of(t->Phi[24], t->Phi[24]);
+    b[10] = lane_pair_of(t->Phi[25], t->Phi[25]);
+    b[11] = lane_pair_of(t->Phi[26], t->Phi[26]);
+    b[12] = lane_pair_of(t->Phi[27], t->Phi[27]);
+    b[13] = lane_pair_of(t->Phi[28], t->Phi[28]);
+    b[14] = lane_pair_of(t->Phi[29], t->Phi[29]);
+    for (c = 0; c + 1 < 18; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[15][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -2795,96 +2789,41 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_1(const ned_doppler18_tra
 NED_DOPPLER18_BLOCK void phi_times_p_row_2(const ned_doppler18_filter *restrict f, const
         ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[30]*f->P[0][0] + t->Phi[31]*f->P[1][0] + t->Phi[32]*f->P[2][0] +
-            t->Phi[33]*f->P[3][0] + t->Phi[34]*f->P[4][0] + t->Phi[35]*f->P[5][0] +
-            t->Phi[36]*f->P[7][0] + t->Phi[37]*f->P[8][0] + t->Phi[38]*f->P[9][0] +
-            t->Phi[39]*f->P[10][0] + t->Phi[40]*f->P[11][0] + t->Phi[41]*f->P[12][0] +
-            t->Phi[42]*f->P[13][0] + t->Phi[43]*f->P[14][0] + t->Phi[44]*f->P[15][0];
-    w->M[1] = t->Phi[30]*f->P[0][1] + t->Phi[31]*f->P[1][1] + t->Phi[32]*f->P[2][1] +
-            t->Phi[33]*f->P[3][1] + t->Phi[34]*f->P[4][1] + t->Phi[35]*f->P[5][1] +
-            t->Phi[36]*f->P[7][1] + t->Phi[37]*f->P[8][1] + t->Phi[38]*f->P[9][1] +
-            t->Phi[39]*f->P[10][1] + t->Phi[40]*f->P[11][1] + t->Phi[41]*f->P[12][1] +
-            t->Phi[42]*f->P[13][1] + t->Phi[43]*f->P[14][1] + t->Phi[44]*f->P[15][1];
-    w->M[2] = t->Phi[30]*f->P[0][2] + t->Phi[31]*f->P[1][2] + t->Phi[32]*f->P[2][2] +
-            t->Phi[33]*f->P[3][2] + t->Phi[34]*f->P[4][2] + t->Phi[35]*f->P[5][2] +
-            t->Phi[36]*f->P[7][2] + t->Phi[37]*f->P[8][2] + t->Phi[38]*f->P[9][2] +
-            t->Phi[39]*f->P[10][2] + t->Phi[40]*f->P[11][2] + t->Phi[41]*f->P[12][2] +
-            t->Phi[42]*f->P[13][2] + t->Phi[43]*f->P[14][2] + t->Phi[44]*f->P[15][2];
-    w->M[3] = t->Phi[30]*f->P[0][3] + t->Phi[31]*f->P[1][3] + t->Phi[32]*f->P[2][3] +
-            t->Phi[33]*f->P[3][3] + t->Phi[34]*f->P[4][3] + t->Phi[35]*f->P[5][3] +
-            t->Phi[36]*f->P[7][3] + t->Phi[37]*f->P[8][3] + t->Phi[38]*f->P[9][3] +
-            t->Phi[39]*f->P[10][3] + t->Phi[40]*f->P[11][3] + t->Phi[41]*f->P[12][3] +
-            t->Phi[42]*f->P[13][3] + t->Phi[43]*f->P[14][3] + t->Phi[44]*f->P[15][3];
-    w->M[4] = t->Phi[30]*f->P[0][4] + t->Phi[31]*f->P[1][4] + t->Phi[32]*f->P[2][4] +
-            t->Phi[33]*f->P[3][4] + t->Phi[34]*f->P[4][4] + t->Phi[35]*f->P[5][4] +
-            t->Phi[36]*f->P[7][4] + t->Phi[37]*f->P[8][4] + t->Phi[38]*f->P[9][4] +
-            t->Phi[39]*f->P[10][4] + t->Phi[40]*f->P[11][4] + t->Phi[41]*f->P[12][4] +
-            t->Phi[42]*f->P[13][4] + t->Phi[43]*f->P[14][4] + t->Phi[44]*f->P[15][4];
-    w->M[5] = t->Phi[30]*f->P[0][5] + t->Phi[31]*f->P[1][5] + t->Phi[32]*f->P[2][5] +
-            t->Phi[33]*f->P[3][5] + t->Phi[34]*f->P[4][5] + t->Phi[35]*f->P[5][5] +
-            t->Phi[36]*f->P[7][5] + t->Phi[37]*f->P[8][5] + t->Phi[38]*f->P[9][5] +
-            t->Phi[39]*f->P[10][5] + t->Phi[40]*f->P[11][5] + t->Phi[41]*f->P[12][5] +
-            t->Phi[42]*f->P[13][5] + t->Phi[43]*f->P[14][5] + t->Phi[44]*f->P[15][5];
-    w->M[6] = t->Phi[30]*f->P[0][6] + t->Phi[31]*f->P[1][6] + t->Phi[32]*f->P[2][6] +
-            t->Phi[33]*f->P[3][6] + t->Phi[34]*f->P[4][6] + t->Phi[35]*f->P[5][6] +
-            t->Phi[36]*f->P[7][6] + t->Phi[37]*f->P[8][6] + t->Phi[38]*f->P[9][6] +
-            t->Phi[39]*f->P[10][6] + t->Phi[40]*f->P[11][6] + t->Phi[41]*f->P[12][6] +
-            t->Phi[42]*f->P[13][6] + t->Phi[43]*f->P[14][6] + t->Phi[44]*f->P[15][6];
-    w->M[7] = t->Phi[30]*f->P[0][7] + t->Phi[31]*f->P[1][7] + t->Phi[32]*f->P[2][7] +
-            t->Phi[33]*f->P[3][7] + t->Phi[34]*f->P[4][7] + t->Phi[35]*f->P[5][7] +
-            t->Phi[36]*f->P[7][7] + t->Phi[37]*f->P[8][7] + t->Phi[38]*f->P[9][7] +
-            t->Phi[39]*f->P[10][7] + t->Phi[40]*f->P[11][7] + t->Phi[41]*f->P[12][7] +
-            t->Phi[42]*f->P[13][7] + t->Phi[43]*f->P[14][7] + t->Phi[44]*f->P[15][7];
-    w->M[8] = t->Phi[30]*f->P[0][8] + t->Phi[31]*f->P[1][8] + t->Phi[32]*f->P[2][8] +
-            t->Phi[33]*f->P[3][8] + t->Phi[34]*f->P[4][8] + t->Phi[35]*f->P[5][8] +
-            t->Phi[36]*f->P[7][8] + t->Phi[37]*f->P[8][8] + t->Phi[38]*f->P[9][8] +
-            t->Phi[39]*f->P[10][8] + t->Phi[40]*f->P[11][8] + t->Phi[41]*f->P[12][8] +
-            t->Phi[42]*f->P[13][8] + t->Phi[43]*f->P[14][8] + t->Phi[44]*f->P[15][8];
-    w->M[9] = t->Phi[30]*f->P[0][9] + t->Phi[31]*f->P[1][9] + t->Phi[32]*f->P[2][9] +
-            t->Phi[33]*f->P[3][9] + t->Phi[34]*f->P[4][9] + t->Phi[35]*f->P[5][9] +
-            t->Phi[36]*f->P[7][9] + t->Phi[37]*f->P[8][9] + t->Phi[38]*f->P[9][9] +
-            t->Phi[39]*f->P[10][9] + t->Phi[40]*f->P[11][9] + t->Phi[41]*f->P[12][9] +
-            t->Phi[42]*f->P[13][9] + t->Phi[43]*f->P[14][9] + t->Phi[44]*f->P[15][9];
-    w->M[10] = t->Phi[30]*f->P[0][10] + t->Phi[31]*f->P[1][10] + t->Phi[32]*f->P[2][10] +
-            t->Phi[33]*f->P[3][10] + t->Phi[34]*f->P[4][10] + t->Phi[35]*f->P[5][10] +
-            t->Phi[36]*f->P[7][10] + t->Phi[37]*f->P[8][10] + t->Phi[38]*f->P[9][10] +
-            t->Phi[39]*f->P[10][10] + t->Phi[40]*f->P[11][10] + t->Phi[41]*f->P[12][10] +
-            t->Phi[42]*f->P[13][10] + t->Phi[43]*f->P[14][10] + t->Phi[44]*f->P[15][10];
-    w->M[11] = t->Phi[30]*f->P[0][11] + t->Phi[31]*f->P[1][11] + t->Phi[32]*f->P[2][11] +
-            t->Phi[33]*f->P[3][11] + t->Phi[34]*f->P[4][11] + t->Phi[35]*f->P[5][11] +
-            t->Phi[36]*f->P[7][11] + t->Phi[37]*f->P[8][11] + t->Phi[38]*f->P[9][11] +
-            t->Phi[39]*f->P[10][11] + t->Phi[40]*f->P[11][11] + t->Phi[41]*f->P[12][11] +
-            t->Phi[42]*f->P[13][11] + t->Phi[43]*f->P[14][11] + t->Phi[44]*f->P[15][11];
-    w->M[12] = t->Phi[30]*f->P[0][12] + t->Phi[31]*f->P[1][12] + t->Phi[32]*f->P[2][12] +
-            t->Phi[33]*f->P[3][12] + t->Phi[34]*f->P[4][12] + t->Phi[35]*f->P[5][12] +
-            t->Phi[36]*f->P[7][12] + t->Phi[37]*f->P[8][12] + t->Phi[38]*f->P[9][12] +
-            t->Phi[39]*f->P[10][12] + t->Phi[40]*f->P[11][12] + t->Phi[41]*f->P[12][12] +
-            t->Phi[42]*f->P[13][12] + t->Phi[43]*f->P[14][12] + t->Phi[44]*f->P[15][12];
-    w->M[13] = t->Phi[30]*f->P[0][13] + t->Phi[31]*f->P[1][13] + t->Phi[32]*f->P[2][13] +
-            t->Phi[33]*f->P[3][13] + t->Phi[34]*f->P[4][13] + t->Phi[35]*f->P[5][13] +
-            t->Phi[36]*f->P[7][13] + t->Phi[37]*f->P[8][13] + t->Phi[38]*f->P[9][13] +
-            t->Phi[39]*f->P[10][13] + t->Phi[40]*f->P[11][13] + t->Phi[41]*f->P[12][13] +
-            t->Phi[42]*f->P[13][13] + t->Phi[43]*f->P[14][13] + t->Phi[44]*f->P[15][13];
-    w->M[14] = t->Phi[30]*f->P[0][14] + t->Phi[31]*f->P[1][14] + t->Phi[32]*f->P[2][14] +
-            t->Phi[33]*f->P[3][14] + t->Phi[34]*f->P[4][14] + t->Phi[35]*f->P[5][14] +
-            t->Phi[36]*f->P[7][14] + t->Phi[37]*f->P[8][14] + t->Phi[38]*f->P[9][14] +
-            t->Phi[39]*f->P[10][14] + t->Phi[40]*f->P[11][14] + t->Phi[41]*f->P[12][14] +
-            t->Phi[42]*f->P[13][14] + t->Phi[43]*f->P[14][14] + t->Phi[44]*f->P[15][14];
-    w->M[15] = t->Phi[30]*f->P[0][15] + t->Phi[31]*f->P[1][15] + t->Phi[32]*f->P[2][15] +
-            t->Phi[33]*f->P[3][15] + t->Phi[34]*f->P[4][15] + t->Phi[35]*f->P[5][15] +
-            t->Phi[36]*f->P[7][15] + t->Phi[37]*f->P[8][15] + t->Phi[38]*f->P[9][15] +
-            t->Phi[39]*f->P[10][15] + t->Phi[40]*f->P[11][15] + t->Phi[41]*f->P[12][15] +
-            t->Phi[42]*f->P[13][15] + t->Phi[43]*f->P[14][15] + t->Phi[44]*f->P[15][15];
-    w->M[16] = t->Phi[30]*f->P[0][16] + t->Phi[31]*f->P[1][16] + t->Phi[32]*f->P[2][16] +
-            t->Phi[33]*f->P[3][16] + t->Phi[34]*f->P[4][16] + t->Phi[35]*f->P[5][16] +
-            t->Phi[36]*f->P[7][16] + t->Phi[37]*f->P[8][16] + t->Phi[38]*f->P[9][16] +
-            t->Phi[39]*f->P[10][16] + t->Phi[40]*f->P[11][16] + t->Phi[41]*f->P[12][16] +
-            t->Phi[42]*f->P[13][16] + t->Phi[43]*f->P[14][16] + t->Phi[44]*f->P[15][16];
-    w->M[17] = t->Phi[30]*f->P[0][17] + t->Phi[31]*f->P[1][17] + t->Phi[32]*f->P[2][17] +
-            t->Phi[33]*f->P[3][17] + t->Phi[34]*f->P[4][17] + t->Phi[35]*f->P[5][17] +
-            t->Phi[36]*f->P[7][17] + t->Phi[37]*f->P[8][17] + t->Phi[38]*f->P[9][17] +
-            t->Phi[39]*f->P[10][17] + t->Phi[40]*f->P[11][17] + t->Phi[41]*f->P[12][17] +
-            t->Phi[42]*f->P[13][17] + t->Phi[43]*f->P[14][17] + t->Phi[44]*f->P[15][17];
+    int c;
+    lane_pair b[15];
+    b[0] = lane_pair_of(t->Phi[30], t->Phi[30]);
+    b[1] = lane_pair_of(t->Phi[31], t->Phi[31]);
+    b[2] = lane_pair_of(t->Phi[32], t->Phi[32]);
+    b[3] = lane_pair_of(t->Phi[33], t->Phi[33]);
+    b[4] = lane_pair_of(t->Phi[34], t->Phi[34]);
+    b[5] = lane_pair_of(t->Phi[35], t->Phi[35]);
+    b[6] = lane_pair_of(t->Phi[36], t->Phi[36]);
+    b[7] = lane_pair_of(t->Phi[37], t->Phi[37]);
+    b[8] = lane_pair_of(t->Phi[38], t->Phi[38]);
+    b[9] = lane_pair_of(t->Phi[39], t->Phi[39]);
+    b[10] = lane_pair_of(t->Phi[40], t->Phi[40]);
+    b[11] = lane_pair_of(t->Phi[41], t->Phi[41]);
+    b[12] = lane_pair_of(t->Phi[42], t->Phi[42]);
+    b[13] = lane_pair_of(t->Phi[43], t->Phi[43]);
+    b[14] = lane_pair_of(t->Phi[44], t->Phi[44]);
+    for (c = 0; c + 1 < 18; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[15][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -2952,96 +2891,41 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_2(const ned_doppler18_tra
 NED_DOPPLER18_BLOCK void phi_times_p_row_3(const ned_doppler18_filter *restrict f, const
         ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[45]*f->P[0][0] + t->Phi[46]*f->P[1][0] + t->Phi[47]*f->P[2][0] +
-            t->Phi[48]*f->P[3][0] + t->Phi[49]*f->P[4][0] + t->Phi[50]*f->P[5][0] +
-            t->Phi[51]*f->P[7][0] + t->Phi[52]*f->P[8][0] + t->Phi[53]*f->P[9][0] +
-            t->Phi[54]*f->P[10][0] + t->Phi[55]*f->P[11][0] + t->Phi[56]*f->P[12][0] +
-            t->Phi[57]*f->P[13][0] + t->Phi[58]*f->P[14][0] + t->Phi[59]*f->P[15][0];
-    w->M[1] = t->Phi[45]*f->P[0][1] + t->Phi[46]*f->P[1][1] + t->Phi[47]*f->P[2][1] +
-            t->Phi[48]*f->P[3][1] + t->Phi[49]*f->P[4][1] + t->Phi[50]*f->P[5][1] +
-            t->Phi[51]*f->P[7][1] + t->Phi[52]*f->P[8][1] + t->Phi[53]*f->P[9][1] +
-            t->Phi[54]*f->P[10][1] + t->Phi[55]*f->P[11][1] + t->Phi[56]*f->P[12][1] +
-            t->Phi[57]*f->P[13][1] + t->Phi[58]*f->P[14][1] + t->Phi[59]*f->P[15][1];
-    w->M[2] = t->Phi[45]*f->P[0][2] + t->Phi[46]*f->P[1][2] + t->Phi[47]*f->P[2][2] +
-            t->Phi[48]*f->P[3][2] + t->Phi[49]*f->P[4][2] + t->Phi[50]*f->P[5][2] +
-            t->Phi[51]*f->P[7][2] + t->Phi[52]*f->P[8][2] + t->Phi[53]*f->P[9][2] +
-            t->Phi[54]*f->P[10][2] + t->Phi[55]*f->P[11][2] + t->Phi[56]*f->P[12][2] +
-            t->Phi[57]*f->P[13][2] + t->Phi[58]*f->P[14][2] + t->Phi[59]*f->P[15][2];
-    w->M[3] = t->Phi[45]*f->P[0][3] + t->Phi[46]*f->P[1][3] + t->Phi[47]*f->P[2][3] +
-            t->Phi[48]*f->P[3][3] + t->Phi[49]*f->P[4][3] + t->Phi[50]*f->P[5][3] +
-            t->Phi[51]*f->P[7][3] + t->Phi[52]*f->P[8][3] + t->Phi[53]*f->P[9][3] +
-            t->Phi[54]*f->P[10][3] + t->Phi[55]*f->P[11][3] + t->Phi[56]*f->P[12][3] +
-            t->Phi[57]*f->P[13][3] + t->Phi[58]*f->P[14][3] + t->Phi[59]*f->P[15][3];
-    w->M[4] = t->Phi[45]*f->P[0][4] + t->Phi[46]*f->P[1][4] + t->Phi[47]*f->P[2][4] +
-            t->Phi[48]*f->P[3][4] + t->Phi[49]*f->P[4][4] + t->Phi[50]*f->P[5][4] +
-            t->Phi[51]*f->P[7][4] + t->Phi[52]*f->P[8][4] + t->Phi[53]*f->P[9][4] +
-            t->Phi[54]*f->P[10][4] + t->Phi[55]*f->P[11][4] + t->Phi[56]*f->P[12][4] +
-            t->Phi[57]*f->P[13][4] + t->Phi[58]*f->P[14][4] + t->Phi[59]*f->P[15][4];
-    w->M[5] = t->Phi[45]*f->P[0][5] + t->Phi[46]*f->P[1][5] + t->Phi[47]*f->P[2][5] +
-            t->Phi[48]*f->P[3][5] + t->Phi[49]*f->P[4][5] + t->Phi[50]*f->P[5][5] +
-            t->Phi[51]*f->P[7][5] + t->Phi[52]*f->P[8][5] + t->Phi[53]*f->P[9][5] +
-            t->Phi[54]*f->P[10][5] + t->Phi[55]*f->P[11][5] + t->Phi[56]*f->P[12][5] +
-            t->Phi[57]*f->P[13][5] + t->Phi[58]*f->P[14][5] + t->Phi[59]*f->P[15][5];
-    w->M[6] = t->Phi[45]*f->P[0][6] + t->Phi[46]*f->P[1][6] + t->Phi[47]*f->P[2][6] +
-            t->Phi[48]*f->P[3][6] + t->Phi[49]*f->P[4][6] + t->Phi[50]*f->P[5][6] +
-            t->Phi[51]*f->P[7][6] + t->Phi[52]*f->P[8][6] + t->Phi[53]*f->P[9][6] +
-            t->Phi[54]*f->P[10][6] + t->Phi[55]*f->P[11][6] + t->Phi[56]*f->P[12][6] +
-            t->Phi[57]*f->P[13][6] + t->Phi[58]*f->P[14][6] + t->Phi[59]*f->P[15][6];
-    w->M[7] = t->Phi[45]*f->P[0][7] + t->Phi[46]*f->P[1][7] + t->Phi[47]*f->P[2][7] +
-            t->Phi[48]*f->P[3][7] + t->Phi[49]*f->P[4][7] + t->Phi[50]*f->P[5][7] +
-            t->Phi[51]*f->P[7][7] + t->Phi[52]*f->P[8][7] + t->Phi[53]*f->P[9][7] +
-            t->Phi[54]*f->P[10][7] + t->Phi[55]*f->P[11][7] + t->Phi[56]*f->P[12][7] +
-            t->Phi[57]*f->P[13][7] + t->Phi[58]*f->P[14][7] + t->Phi[59]*f->P[15][7];
-    w->M[8] = t->Phi[45]*f->P[0][8] + t->Phi[46]*f->P[1][8] + t->Phi[47]*f->P[2][8] +
-            t->Phi[48]*f->P[3][8] + t->Phi[49]*f->P[4][8] + t->Phi[50]*f->P[5][8] +
-            t->Phi[51]*f->P[7][8] + t->Phi[52]*f->P[8][8] + t->Phi[53]*f->P[9][8] +
-            t->Phi[54]*f->P[10][8] + t->Phi[55]*f->P[11][8] + t->Phi[56]*f->P[12][8] +
-            t->Phi[57]*f->P[13][8] + t->Phi[58]*f->P[14][8] + t->Phi[59]*f->P[15][8];
-    w->M[9] = t->Phi[45]*f->P[0][9] + t->Phi[46]*f->P[1][9] + t->Phi[47]*f->P[2][9] +
-            t->Phi[48]*f->P[3][9] + t->Phi[49]*f->P[4][9] + t->Phi[50]*f->P[5][9] +
-            t->Phi[51]*f->P[7][9] + t->Phi[52]*f->P[8][9] + t->Phi[53]*f->P[9][9] +
-            t->Phi[54]*f->P[10][9] + t->Phi[55]*f->P[11][9] + t->Phi[56]*f->P[12][9] +
-            t->Phi[57]*f->P[13][9] + t->Phi[58]*f->P[14][9] + t->Phi[59]*f->P[15][9];
-    w->M[10] = t->Phi[45]*f->P[0][10] + t->Phi[46]*f->P[1][10] + t->Phi[47]*f->P[2][10] +
-            t->Phi[48]*f->P[3][10] + t->Phi[49]*f->P[4][10] + t->Phi[50]*f->P[5][10] +
-            t->Phi[51]*f->P[7][10] + t->Phi[52]*f->P[8][10] + t->Phi[53]*f->P[9][10] +
-            t->Phi[54]*f->P[10][10] + t->Phi[55]*f->P[11][10] + t->Phi[56]*f->P[12][10] +
-            t->Phi[57]*f->P[13][10] + t->Phi[58]*f->P[14][10] + t->Phi[59]*f->P[15][10];
-    w->M[11] = t->Phi[45]*f->P[0][11] + t->Phi[46]*f->P[1][11] + t->Phi[47]*f->P[2][11] +
-            t->Phi[48]*f->P[3][11] + t->Phi[49]*f->P[4][11] + t->Phi[50]*f->P[5][11] +
-            t->Phi[51]*f->P[7][11] + t->Phi[52]*f->P[8][11] + t->Phi[53]*f->P[9][11] +
-            t->Phi[54]*f->P[10][11] + t->Phi[55]*f->P[11][11] + t->Phi[56]*f->P[12][11] +
-            t->Phi[57]*f->P[13][11] + t->Phi[58]*f->P[14][11] + t->Phi[59]*f->P[15][11];
-    w->M[12] = t->Phi[45]*f->P[0][12] + t->Phi[46]*f->P[1][12] + t->Phi[47]*f->P[2][12] +
-            t->Phi[48]*f->P[3][12] + t->Phi[49]*f->P[4][12] + t->Phi[50]*f->P[5][12] +
-            t->Phi[51]*f->P[7][12] + t->Phi[52]*f->P[8][12] + t->Phi[53]*f->P[9][12] +
-            t->Phi[54]*f->P[10][12] + t->Phi[55]*f->P[11][12] + t->Phi[56]*f->P[12][12] +
-            t->Phi[57]*f->P[13][12] + t->Phi[58]*f->P[14][12] + t->Phi[59]*f->P[15][12];
-    w->M[13] = t->Phi[45]*f->P[0][13] + t->Phi[46]*f->P[1][13] + t->Phi[47]*f->P[2][13] +
-            t->Phi[48]*f->P[3][13] + t->Phi[49]*f->P[4][13] + t->Phi[50]*f->P[5][13] +
-            t->Phi[51]*f->P[7][13] + t->Phi[52]*f->P[8][13] + t->Phi[53]*f->P[9][13] +
-            t->Phi[54]*f->P[10][13] + t->Phi[55]*f->P[11][13] + t->Phi[56]*f->P[12][13] +
-            t->Phi[57]*f->P[13][13] + t->Phi[58]*f->P[14][13] + t->Phi[59]*f->P[15][13];
-    w->M[14] = t->Phi[45]*f->P[0][14] + t->Phi[46]*f->P[1][14] + t->Phi[47]*f->P[2][14] +
-            t->Phi[48]*f->P[3][14] + t->Phi[49]*f->P[4][14] + t->Phi[50]*f->P[5][14] +
-            t->Phi[51]*f->P[7][14] + t->Phi[52]*f->P[8][14] + t->Phi[53]*f->P[9][14] +
-            t->Phi[54]*f->P[10][14] + t->Phi[55]*f->P[11][14] + t->Phi[56]*f->P[12][14] +
-            t->Phi[57]*f->P[13][14] + t->Phi[58]*f->P[14][14] + t->Phi[59]*f->P[15][14];
-    w->M[15] = t->Phi[45]*f->P[0][15] + t->Phi[46]*f->P[1][15] + t->Phi[47]*f->P[2][15] +
-            t->Phi[48]*f->P[3][15] + t->Phi[49]*f->P[4][15] + t->Phi[50]*f->P[5][15] +
-            t->Phi[51]*f->P[7][15] + t->Phi[52]*f->P[8][15] + t->Phi[53]*f->P[9][15] +
-            t->Phi[54]*f->P[10][15] + t->Phi[55]*f->P[11][15] + t->Phi[56]*f->P[12][15] +
-            t->Phi[57]*f->P[13][15] + t->Phi[58]*f->P[14][15] + t->Phi[59]*f->P[15][15];
-    w->M[16] = t->Phi[45]*f->P[0][16] + t->Phi[46]*f->P[1][16] + t->Phi[47]*f->P[2][16] +
-            t->Phi[48]*f->P[3][16] + t->Phi[49]*f->P[4][16] + t->Phi[50]*f->P[5][16] +
-            t->Phi[51]*f->P[7][16] + t->Phi[52]*f->P[8][16] + t->Phi[53]*f->P[9][16] +
-            t->Phi[54]*f->P[10][16] + t->Phi[55]*f->P[11][16] + t->Phi[56]*f->P[12][16] +
-            t->Phi[57]*f->P[13][16] + t->Phi[58]*f->P[14][16] + t->Phi[59]*f->P[15][16];
-    w->M[17] = t->Phi[45]*f->P[0][17] + t->Phi[46]*f->P[1][17] + t->Phi[47]*f->P[2][17] +
-            t->Phi[48]*f->P[3][17] + t->Phi[49]*f->P[4][17] + t->Phi[50]*f->P[5][17] +
-            t->Phi[51]*f->P[7][17] + t->Phi[52]*f->P[8][17] + t->Phi[53]*f->P[9][17] +
-            t->Phi[54]*f->P[10][17] + t->Phi[55]*f->P[11][17] + t->Phi[56]*f->P[12][17] +
-            t->Phi[57]*f->P[13][17] + t->Phi[58]*f->P[14][17] + t->Phi[59]*f->P[15][17];
+    int c;
+    lane_pair b[15];
+    b[0] = lane_pair_of(t->Phi[45], t->Phi[45]);
+    b[1] = lane_pair_of(t->Phi[46], t->Phi[46]);
+    b[2] = lane_pair_of(t->Phi[47], t->Phi[47]);
+    b[3] = lane_pair_of(t->Phi[48], t->Phi[48]);
+    b[4] = lane_pair_of(t->Phi[49], t->Phi[49]);
+    b[5] = lane_pair_of(t->Phi[50], t->Phi[50]);
+    b[6] = lane_pair_of(t->Phi[51], t->Phi[51]);
+    b[7] = lane_pair_of(t->Phi[52], t->Phi[52]);
+    b[8] = lane_pair_of(t->Phi[53], t->Phi[53]);
+    b[9] = lane_pair_of(t->Phi[54], t->Phi[54]);
+    b[10] = lane_pair_of(t->Phi[55], t->Phi[55]);
+    b[11] = lane_pair_of(t->Phi[56], t->Phi[56]);
+    b[12] = lane_pair_of(t->Phi[57], t->Phi[57]);
+    b[13] = lane_pair_of(t->Phi[58], t->Phi[58]);
+    b[14] = lane_pair_of(t->Phi[59], t->Phi[59]);
+    for (c = 0; c + 1 < 18; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[15][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -3101,96 +2985,41 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_3(const ned_doppler18_tra
 NED_DOPPLER18_BLOCK void phi_times_p_row_4(const ned_doppler18_filter *restrict f, const
         ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[60]*f->P[0][0] + t->Phi[61]*f->P[1][0] + t->Phi[62]*f->P[2][0] +
-            t->Phi[63]*f->P[3][0] + t->Phi[64]*f->P[4][0] + t->Phi[65]*f->P[5][0] +
-            t->Phi[66]*f->P[7][0] + t->Phi[67]*f->P[8][0] + t->Phi[68]*f->P[9][0] +
-            t->Phi[69]*f->P[10][0] + t->Phi[70]*f->P[11][0] + t->Phi[71]*f->P[12][0] +
-            t->Phi[72]*f->P[13][0] + t->Phi[73]*f->P[14][0] + t->Phi[74]*f->P[15][0];
-    w->M[1] = t->Phi[60]*f->P[0][1] + t->Phi[61]*f->P[1][1] + t->Phi[62]*f->P[2][1] +
-            t->Phi[63]*f->P[3][1] + t->Phi[64]*f->P[4][1] + t->Phi[65]*f->P[5][1] +
-            t->Phi[66]*f->P[7][1] + t->Phi[67]*f->P[8][1] + t->Phi[68]*f->P[9][1] +
-            t->Phi[69]*f->P[10][1] + t->Phi[70]*f->P[11][1] + t->Phi[71]*f->P[12][1] +
-            t->Phi[72]*f->P[13][1] + t->Phi[73]*f->P[14][1] + t->Phi[74]*f->P[15][1];
-    w->M[2] = t->Phi[60]*f->P[0][2] + t->Phi[61]*f->P[1][2] + t->Phi[62]*f->P[2][2] +
-            t->Phi[63]*f->P[3][2] + t->Phi[64]*f->P[4][2] + t->Phi[65]*f->P[5][2] +
-            t->Phi[66]*f->P[7][2] + t->Phi[67]*f->P[8][2] + t->Phi[68]*f->P[9][2] +
-            t->Phi[69]*f->P[10][2] + t->Phi[70]*f->P[11][2] + t->Phi[71]*f->P[12][2] +
-            t->Phi[72]*f->P[13][2] + t->Phi[73]*f->P[14][2] + t->Phi[74]*f->P[15][2];
-    w->M[3] = t->Phi[60]*f->P[0][3] + t->Phi[61]*f->P[1][3] + t->Phi[62]*f->P[2][3] +
-            t->Phi[63]*f->P[3][3] + t->Phi[64]*f->P[4][3] + t->Phi[65]*f->P[5][3] +
-            t->Phi[66]*f->P[7][3] + t->Phi[67]*f->P[8][3] + t->Phi[68]*f->P[9][3] +
-            t->Phi[69]*f->P[10][3] + t->Phi[70]*f->P[11][3] + t->Phi[71]*f->P[12][3] +
-            t->Phi[72]*f->P[13][3] + t->Phi[73]*f->P[14][3] + t->Phi[74]*f->P[15][3];
-    w->M[4] = t->Phi[60]*f->P[0][4] + t->Phi[61]*f->P[1][4] + t->Phi[62]*f->P[2][4] +
-            t->Phi[63]*f->P[3][4] + t->Phi[64]*f->P[4][4] + t->Phi[65]*f->P[5][4] +
-            t->Phi[66]*f->P[7][4] + t->Phi[67]*f->P[8][4] + t->Phi[68]*f->P[9][4] +
-            t->Phi[69]*f->P[10][4] + t->Phi[70]*f->P[11][4] + t->Phi[71]*f->P[12][4] +
-            t->Phi[72]*f->P[13][4] + t->Phi[73]*f->P[14][4] + t->Phi[74]*f->P[15][4];
-    w->M[5] = t->Phi[60]*f->P[0][5] + t->Phi[61]*f->P[1][5] + t->Phi[62]*f->P[2][5] +
-            t->Phi[63]*f->P[3][5] + t->Phi[64]*f->P[4][5] + t->Phi[65]*f->P[5][5] +
-            t->Phi[66]*f->P[7][5] + t->Phi[67]*f->P[8][5] + t->Phi[68]*f->P[9][5] +
-            t->Phi[69]*f->P[10][5] + t->Phi[70]*f->P[11][5] + t->Phi[71]*f->P[12][5] +
-            t->Phi[72]*f->P[13][5] + t->Phi[73]*f->P[14][5] + t->Phi[74]*f->P[15][5];
-    w->M[6] = t->Phi[60]*f->P[0][6] + t->Phi[61]*f->P[1][6] + t->Phi[62]*f->P[2][6] +
-            t->Phi[63]*f->P[3][6] + t->Phi[64]*f->P[4][6] + t->Phi[65]*f->P[5][6] +
-            t->Phi[66]*f->P[7][6] + t->Phi[67]*f->P[8][6] + t->Phi[68]*f->P[9][6] +
-            t->Phi[69]*f->P[10][6] + t->Phi[70]*f->P[11][6] + t->Phi[71]*f->P[12][6] +
-            t->Phi[72]*f->P[13][6] + t->Phi[73]*f->P[14][6] + t->Phi[74]*f->P[15][6];
-    w->M[7] = t->Phi[60]*f->P[0][7] + t->Phi[61]*f->P[1][7] + t->Phi[62]*f->P[2][7] +
-            t->Phi[63]*f->P[3][7] + t->Phi[64]*f->P[4][7] + t->Phi[65]*f->P[5][7] +
-            t->Phi[66]*f->P[7][7] + t->Phi[67]*f->P[8][7] + t->Phi[68]*f->P[9][7] +
-            t->Phi[69]*f->P[10][7] + t->Phi[70]*f->P[11][7] + t->Phi[71]*f->P[12][7] +
-            t->Phi[72]*f->P[13][7] + t->Phi[73]*f->P[14][7] + t->Phi[74]*f->P[15][7];
-    w->M[8] = t->Phi[60]*f->P[0][8] + t->Phi[61]*f->P[1][8] + t->Phi[62]*f->P[2][8] +
-            t->Phi[63]*f->P[3][8] + t->Phi[64]*f->P[4][8] + t->Phi[65]*f->P[5][8] +
-            t->Phi[66]*f->P[7][8] + t->Phi[67]*f->P[8][8] + t->Phi[68]*f->P[9][8] +
-            t->Phi[69]*f->P[10][8] + t->Phi[70]*f->P[11][8] + t->Phi[71]*f->P[12][8] +
-            t->Phi[72]*f->P[13][8] + t->Phi[73]*f->P[14][8] + t->Phi[74]*f->P[15][8];
-    w->M[9] = t->Phi[60]*f->P[0][9] + t->Phi[61]*f->P[1][9] + t->Phi[62]*f->P[2][9] +
-            t->Phi[63]*f->P[3][9] + t->Phi[64]*f->P[4][9] + t->Phi[65]*f->P[5][9] +
-            t->Phi[66]*f->P[7][9] + t->Phi[67]*f->P[8][9] + t->Phi[68]*f->P[9][9] +
-            t->Phi[69]*f->P[10][9] + t->Phi[70]*f->P[11][9] + t->Phi[71]*f->P[12][9] +
-            t->Phi[72]*f->P[13][9] + t->Phi[73]*f->P[14][9] + t->Phi[74]*f->P[15][9];
-    w->M[10] = t->Phi[60]*f->P[0][10] + t->Phi[61]*f->P[1][10] + t->Phi[62]*f->P[2][10] +
-            t->Phi[63]*f->P[3][10] + t->Phi[64]*f->P[4][10] + t->Phi[65]*f->P[5][10] +
-            t->Phi[66]*f->P[7][10] + t->Phi[67]*f->P[8][10] + t->Phi[68]*f->P[9][10] +
-            t->Phi[69]*f->P[10][10] + t->Phi[70]*f->P[11][10] + t->Phi[71]*f->P[12][10] +
-            t->Phi[72]*f->P[13][10] + t->Phi[73]*f->P[14][10] + t->Phi[74]*f->P[15][10];
-    w->M[11] = t->Phi[60]*f->P[0][11] + t->Phi[61]*f->P[1][11] + t->Phi[62]*f->P[2][11] +
-            t->Phi[63]*f->P[3][11] + t->Phi[64]*f->P[4][11] + t->Phi[65]*f->P[5][11] +
-            t->Phi[66]*f->P[7][11] + t->Phi[67]*f->P[8][11] + t->Phi[68]*f->P[9][11] +
-            t->Phi[69]*f->P[10][11] + t->Phi[70]*f->P[11][11] + t->Phi[71]*f->P[12][11] +
-            t->Phi[72]*f->P[13][11] + t->Phi[73]*f->P[14][11] + t->Phi[74]*f->P[15][11];
-    w->M[12] = t->Phi[60]*f->P[0][12] + t->Phi[61]*f->P[1][12] + t->Phi[62]*f->P[2][12] +
-            t->Phi[63]*f->P[3][12] + t->Phi[64]*f->P[4][12] + t->Phi[65]*f->P[5][12] +
-            t->Phi[66]*f->P[7][12] + t->Phi[67]*f->P[8][12] + t->Phi[68]*f->P[9][12] +
-            t->Phi[69]*f->P[10][12] + t->Phi[70]*f->P[11][12] + t->Phi[71]*f->P[12][12] +
-            t->Phi[72]*f->P[13][12] + t->Phi[73]*f->P[14][12] + t->Phi[74]*f->P[15][12];
-    w->M[13] = t->Phi[60]*f->P[0][13] + t->Phi[61]*f->P[1][13] + t->Phi[62]*f->P[2][13] +
-            t->Phi[63]*f->P[3][13] + t->Phi[64]*f->P[4][13] + t->Phi[65]*f->P[5][13] +
-            t->Phi[66]*f->P[7][13] + t->Phi[67]*f->P[8][13] + t->Phi[68]*f->P[9][13] +
-            t->Phi[69]*f->P[10][13] + t->Phi[70]*f->P[11][13] + t->Phi[71]*f->P[12][13] +
-            t->Phi[72]*f->P[13][13] + t->Phi[73]*f->P[14][13] + t->Phi[74]*f->P[15][13];
-    w->M[14] = t->Phi[60]*f->P[0][14] + t->Phi[61]*f->P[1][14] + t->Phi[62]*f->P[2][14] +
-            t->Phi[63]*f->P[3][14] + t->Phi[64]*f->P[4][14] + t->Phi[65]*f->P[5][14] +
-            t->Phi[66]*f->P[7][14] + t->Phi[67]*f->P[8][14] + t->Phi[68]*f->P[9][14] +
-            t->Phi[69]*f->P[10][14] + t->Phi[70]*f->P[11][14] + t->Phi[71]*f->P[12][14] +
-            t->Phi[72]*f->P[13][14] + t->Phi[73]*f->P[14][14] + t->Phi[74]*f->P[15][14];
-    w->M[15] = t->Phi[60]*f->P[0][15] + t->Phi[61]*f->P[1][15] + t->Phi[62]*f->P[2][15] +
-            t->Phi[63]*f->P[3][15] + t->Phi[64]*f->P[4][15] + t->Phi[65]*f->P[5][15] +
-            t->Phi[66]*f->P[7][15] + t->Phi[67]*f->P[8][15] + t->Phi[68]*f->P[9][15] +
-            t->Phi[69]*f->P[10][15] + t->Phi[70]*f->P[11][15] + t->Phi[71]*f->P[12][15] +
-            t->Phi[72]*f->P[13][15] + t->Phi[73]*f->P[14][15] + t->Phi[74]*f->P[15][15];
-    w->M[16] = t->Phi[60]*f->P[0][16] + t->Phi[61]*f->P[1][16] + t->Phi[62]*f->P[2][16] +
-            t->Phi[63]*f->P[3][16] + t->Phi[64]*f->P[4][16] + t->Phi[65]*f->P[5][16] +
-            t->Phi[66]*f->P[7][16] + t->Phi[67]*f->P[8][16] + t->Phi[68]*f->P[9][16] +
-            t->Phi[69]*f->P[10][16] + t->Phi[70]*f->P[11][16] + t->Phi[71]*f->P[12][16] +
-            t->Phi[72]*f->P[13][16] + t->Phi[73]*f->P[14][16] + t->Phi[74]*f->P[15][16];
-    w->M[17] = t->Phi[60]*f->P[0][17] + t->Phi[61]*f->P[1][17] + t->Phi[62]*f->P[2][17] +
-            t->Phi[63]*f->P[3][17] + t->Phi[64]*f->P[4][17] + t->Phi[65]*f->P[5][17] +
-            t->Phi[66]*f->P[7][17] + t->Phi[67]*f->P[8][17] + t->Phi[68]*f->P[9][17] +
-            t->Phi[69]*f->P[10][17] + t->Phi[70]*f->P[11][17] + t->Phi[71]*f->P[12][17] +
-            t->Phi[72]*f->P[13][17] + t->Phi[73]*f->P[14][17] + t->Phi[74]*f->P[15][17];
+    int c;
+    lane_pair b[15];
+    b[0] = lane_pair_of(t->Phi[60], t->Phi[60]);
+    b[1] = lane_pair_of(t->Phi[61], t->Phi[61]);
+    b[2] = lane_pair_of(t->Phi[62], t->Phi[62]);
+    b[3] = lane_pair_of(t->Phi[63], t->Phi[63]);
+    b[4] = lane_pair_of(t->Phi[64], t->Phi[64]);
+    b[5] = lane_pair_of(t->Phi[65], t->Phi[65]);
+    b[6] = lane_pair_of(t->Phi[66], t->Phi[66]);
+    b[7] = lane_pair_of(t->Phi[67], t->Phi[67]);
+    b[8] = lane_pair_of(t->Phi[68], t->Phi[68]);
+    b[9] = lane_pair_of(t->Phi[69], t->Phi[69]);
+    b[10] = lane_pair_of(t->Phi[70], t->Phi[70]);
+    b[11] = lane_pair_of(t->Phi[71], t->Phi[71]);
+    b[12] = lane_pair_of(t->Phi[72], t->Phi[72]);
+    b[13] = lane_pair_of(t->Phi[73], t->Phi[73]);
+    b[14] = lane_pair_of(t->Phi[74], t->Phi[74]);
+    for (c = 0; c + 1 < 18; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[15][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -3242,96 +3071,41 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_4(const ned_doppler18_tra
 NED_DOPPLER18_BLOCK void phi_times_p_row_5(const ned_doppler18_filter *restrict f, const
         ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[75]*f->P[0][0] + t->Phi[76]*f->P[1][0] + t->Phi[77]*f->P[2][0] +
-            t->Phi[78]*f->P[3][0] + t->Phi[79]*f->P[4][0] + t->Phi[80]*f->P[5][0] +
-            t->Phi[81]*f->P[7][0] + t->Phi[82]*f->P[8][0] + t->Phi[83]*f->P[9][0] +
-            t->Phi[84]*f->P[10][0] + t->Phi[85]*f->P[11][0] + t->Phi[86]*f->P[12][0] +
-            t->Phi[87]*f->P[13][0] + t->Phi[88]*f->P[14][0] + t->Phi[89]*f->P[15][0];
-    w->M[1] = t->Phi[75]*f->P[0][1] + t->Phi[76]*f->P[1][1] + t->Phi[77]*f->P[2][1] +
-            t->Phi[78]*f->P[3][1] + t->Phi[79]*f->P[4][1] + t->Phi[80]*f->P[5][1] +
-            t->Phi[81]*f->P[7][1] + t->Phi[82]*f->P[8][1] + t->Phi[83]*f->P[9][1] +
-            t->Phi[84]*f->P[10][1] + t->Phi[85]*f->P[11][1] + t->Phi[86]*f->P[12][1] +
-            t->Phi[87]*f->P[13][1] + t->Phi[88]*f->P[14][1] + t->Phi[89]*f->P[15][1];
-    w->M[2] = t->Phi[75]*f->P[0][2] + t->Phi[76]*f->P[1][2] + t->Phi[77]*f->P[2][2] +
-            t->Phi[78]*f->P[3][2] + t->Phi[79]*f->P[4][2] + t->Phi[80]*f->P[5][2] +
-            t->Phi[81]*f->P[7][2] + t->Phi[82]*f->P[8][2] + t->Phi[83]*f->P[9][2] +
-            t->Phi[84]*f->P[10][2] + t->Phi[85]*f->P[11][2] + t->Phi[86]*f->P[12][2] +
-            t->Phi[87]*f->P[13][2] + t->Phi[88]*f->P[14][2] + t->Phi[89]*f->P[15][2];
-    w->M[3] = t->Phi[75]*f->P[0][3] + t->Phi[76]*f->P[1][3] + t->Phi[77]*f->P[2][3] +
-            t->Phi[78]*f->P[3][3] + t->Phi[79]*f->P[4][3] + t->Phi[80]*f->P[5][3] +
-            t->Phi[81]*f->P[7][3] + t->Phi[82]*f->P[8][3] + t->Phi[83]*f->P[9][3] +
-            t->Phi[84]*f->P[10][3] + t->Phi[85]*f->P[11][3] + t->Phi[86]*f->P[12][3] +
-            t->Phi[87]*f->P[13][3] + t->Phi[88]*f->P[14][3] + t->Phi[89]*f->P[15][3];
-    w->M[4] = t->Phi[75]*f->P[0][4] + t->Phi[76]*f->P[1][4] + t->Phi[77]*f->P[2][4] +
-            t->Phi[78]*f->P[3][4] + t->Phi[79]*f->P[4][4] + t->Phi[80]*f->P[5][4] +
-            t->Phi[81]*f->P[7][4] + t->Phi[82]*f->P[8][4] + t->Phi[83]*f->P[9][4] +
-            t->Phi[84]*f->P[10][4] + t->Phi[85]*f->P[11][4] + t->Phi[86]*f->P[12][4] +
-            t->Phi[87]*f->P[13][4] + t->Phi[88]*f->P[14][4] + t->Phi[89]*f->P[15][4];
-    w->M[5] = t->Phi[75]*f->P[0][5] + t->Phi[76]*f->P[1][5] + t->Phi[77]*f->P[2][5] +
-            t->Phi[78]*f->P[3][5] + t->Phi[79]*f->P[4][5] + t->Phi[80]*f->P[5][5] +
-            t->Phi[81]*f->P[7][5] + t->Phi[82]*f->P[8][5] + t->Phi[83]*f->P[9][5] +
-            t->Phi[84]*f->P[10][5] + t->Phi[85]*f->P[11][5] + t->Phi[86]*f->P[12][5] +
-            t->Phi[87]*f->P[13][5] + t->Phi[88]*f->P[14][5] + t->Phi[89]*f->P[15][5];
-    w->M[6] = t->Phi[75]*f->P[0][6] + t->Phi[76]*f->P[1][6] + t->Phi[77]*f->P[2][6] +
-            t->Phi[78]*f->P[3][6] + t->Phi[79]*f->P[4][6] + t->Phi[80]*f->P[5][6] +
-            t->Phi[81]*f->P[7][6] + t->Phi[82]*f->P[8][6] + t->Phi[83]*f->P[9][6] +
-            t->Phi[84]*f->P[10][6] + t->Phi[85]*f->P[11][6] + t->Phi[86]*f->P[12][6] +
-            t->Phi[87]*f->P[13][6] + t->Phi[88]*f->P[14][6] + t->Phi[89]*f->P[15][6];
-    w->M[7] = t->Phi[75]*f->P[0][7] + t->Phi[76]*f->P[1][7] + t->Phi[77]*f->P[2][7] +
-            t->Phi[78]*f->P[3][7] + t->Phi[79]*f->P[4][7] + t->Phi[80]*f->P[5][7] +
-            t->Phi[81]*f->P[7][7] + t->Phi[82]*f->P[8][7] + t->Phi[83]*f->P[9][7] +
-            t->Phi[84]*f->P[10][7] + t->Phi[85]*f->P[11][7] + t->Phi[86]*f->P[12][7] +
-            t->Phi[87]*f->P[13][7] + t->Phi[88]*f->P[14][7] + t->Phi[89]*f->P[15][7];
-    w->M[8] = t->Phi[75]*f->P[0][8] + t->Phi[76]*f->P[1][8] + t->Phi[77]*f->P[2][8] +
-            t->Phi[78]*f->P[3][8] + t->Phi[79]*f->P[4][8] + t->Phi[80]*f->P[5][8] +
-            t->Phi[81]*f->P[7][8] + t->Phi[82]*f->P[8][8] + t->Phi[83]*f->P[9][8] +
-            t->Phi[84]*f->P[10][8] + t->Phi[85]*f->P[11][8] + t->Phi[86]*f->P[12][8] +
-            t->Phi[87]*f->P[13][8] + t->Phi[88]*f->P[14][8] + t->Phi[89]*f->P[15][8];
-    w->M[9] = t->Phi[75]*f->P[0][9] + t->Phi[76]*f->P[1][9] + t->Phi[77]*f->P[2][9] +
-            t->Phi[78]*f->P[3][9] + t->Phi[79]*f->P[4][9] + t->Phi[80]*f->P[5][9] +
-            t->Phi[81]*f->P[7][9] + t->Phi[82]*f->P[8][9] + t->Phi[83]*f->P[9][9] +
-            t->Phi[84]*f->P[10][9] + t->Phi[85]*f->P[11][9] + t->Phi[86]*f->P[12][9] +
-            t->Phi[87]*f->P[13][9] + t->Phi[88]*f->P[14][9] + t->Phi[89]*f->P[15][9];
-    w->M[10] = t->Phi[75]*f->P[0][10] + t->Phi[76]*f->P[1][10] + t->Phi[77]*f->P[2][10] +
-            t->Phi[78]*f->P[3][10] + t->Phi[79]*f->P[4][10] + t->Phi[80]*f->P[5][10] +
-            t->Phi[81]*f->P[7][10] + t->Phi[82]*f->P[8][10] + t->Phi[83]*f->P[9][10] +
-            t->Phi[84]*f->P[10][10] + t->Phi[85]*f->P[11][10] + t->Phi[86]*f->P[12][10] +
-            t->Phi[87]*f->P[13][10] + t->Phi[88]*f->P[14][10] + t->Phi[89]*f->P[15][10];
-    w->M[11] = t->Phi[75]*f->P[0][11] + t->Phi[76]*f->P[1][11] + t->Phi[77]*f->P[2][11] +
-            t->Phi[78]*f->P[3][11] + t->Phi[79]*f->P[4][11] + t->Phi[80]*f->P[5][11] +
-            t->Phi[81]*f->P[7][11] + t->Phi[82]*f->P[8][11] + t->Phi[83]*f->P[9][11] +
-            t->Phi[84]*f->P[10][11] + t->Phi[85]*f->P[11][11] + t->Phi[86]*f->P[12][11] +
-            t->Phi[87]*f->P[13][11] + t->Phi[88]*f->P[14][11] + t->Phi[89]*f->P[15][11];
-    w->M[12] = t->Phi[75]*f->P[0][12] + t->Phi[76]*f->P[1][12] + t->Phi[77]*f->P[2][12] +
-            t->Phi[78]*f->P[3][12] + t->Phi[79]*f->P[4][12] + t->Phi[80]*f->P[5][12] +
-            t->Phi[81]*f->P[7][12] + t->Phi[82]*f->P[8][12] + t->Phi[83]*f->P[9][12] +
-            t->Phi[84]*f->P[10][12] + t->Phi[85]*f->P[11][12] + t->Phi[86]*f->P[12][12] +
-            t->Phi[87]*f->P[13][12] + t->Phi[88]*f->P[14][12] + t->Phi[89]*f->P[15][12];
-    w->M[13] = t->Phi[75]*f->P[0][13] + t->Phi[76]*f->P[1][13] + t->Phi[77]*f->P[2][13] +
-            t->Phi[78]*f->P[3][13] + t->Phi[79]*f->P[4][13] + t->Phi[80]*f->P[5][13] +
-            t->Phi[81]*f->P[7][13] + t->Phi[82]*f->P[8][13] + t->Phi[83]*f->P[9][13] +
-            t->Phi[84]*f->P[10][13] + t->Phi[85]*f->P[11][13] + t->Phi[86]*f->P[12][13] +
-            t->Phi[87]*f->P[13][13] + t->Phi[88]*f->P[14][13] + t->Phi[89]*f->P[15][13];
-    w->M[14] = t->Phi[75]*f->P[0][14] + t->Phi[76]*f->P[1][14] + t->Phi[77]*f->P[2][14] +
-            t->Phi[78]*f->P[3][14] + t->Phi[79]*f->P[4][14] + t->Phi[80]*f->P[5][14] +
-            t->Phi[81]*f->P[7][14] + t->Phi[82]*f->P[8][14] + t->Phi[83]*f->P[9][14] +
-            t->Phi[84]*f->P[10][14] + t->Phi[85]*f->P[11][14] + t->Phi[86]*f->P[12][14] +
-            t->Phi[87]*f->P[13][14] + t->Phi[88]*f->P[14][14] + t->Phi[89]*f->P[15][14];
-    w->M[15] = t->Phi[75]*f->P[0][15] + t->Phi[76]*f->P[1][15] + t->Phi[77]*f->P[2][15] +
-            t->Phi[78]*f->P[3][15] + t->Phi[79]*f->P[4][15] + t->Phi[80]*f->P[5][15] +
-            t->Phi[81]*f->P[7][15] + t->Phi[82]*f->P[8][15] + t->Phi[83]*f->P[9][15] +
-            t->Phi[84]*f->P[10][15] + t->Phi[85]*f->P[11][15] + t->Phi[86]*f->P[12][15] +
-            t->Phi[87]*f->P[13][15] + t->Phi[88]*f->P[14][15] + t->Phi[89]*f->P[15][15];
-    w->M[16] = t->Phi[75]*f->P[0][16] + t->Phi[76]*f->P[1][16] + t->Phi[77]*f->P[2][16] +
-            t->Phi[78]*f->P[3][16] + t->Phi[79]*f->P[4][16] + t->Phi[80]*f->P[5][16] +
-            t->Phi[81]*f->P[7][16] + t->Phi[82]*f->P[8][16] + t->Phi[83]*f->P[9][16] +
-            t->Phi[84]*f->P[10][16] + t->Phi[85]*f->P[11][16] + t->Phi[86]*f->P[12][16] +
-            t->Phi[87]*f->P[13][16] + t->Phi[88]*f->P[14][16] + t->Phi[89]*f->P[15][16];
-    w->M[17] = t->Phi[75]*f->P[0][17] + t->Phi[76]*f->P[1][17] + t->Phi[77]*f->P[2][17] +
-            t->Phi[78]*f->P[3][17] + t->Phi[79]*f->P[4][17] + t->Phi[80]*f->P[5][17] +
-            t->Phi[81]*f->P[7][17] + t->Phi[82]*f->P[8][17] + t->Phi[83]*f->P[9][17] +
-            t->Phi[84]*f->P[10][17] + t->Phi[85]*f->P[11][17] + t->Phi[86]*f->P[12][17] +
-            t->Phi[87]*f->P[13][17] + t->Phi[88]*f->P[14][17] + t->Phi[89]*f->P[15][17];
+    int c;
+    lane_pair b[15];
+    b[0] = lane_pair_of(t->Phi[75], t->Phi[75]);
+    b[1] = lane_pair_of(t->Phi[76], t->Phi[76]);
+    b[2] = lane_pair_of(t->Phi[77], t->Phi[77]);
+    b[3] = lane_pair_of(t->Phi[78], t->Phi[78]);
+    b[4] = lane_pair_of(t->Phi[79], t->Phi[79]);
+    b[5] = lane_pair_of(t->Phi[80], t->Phi[80]);
+    b[6] = lane_pair_of(t->Phi[81], t->Phi[81]);
+    b[7] = lane_pair_of(t->Phi[82], t->Phi[82]);
+    b[8] = lane_pair_of(t->Phi[83], t->Phi[83]);
+    b[9] = lane_pair_of(t->Phi[84], t->Phi[84]);
+    b[10] = lane_pair_of(t->Phi[85], t->Phi[85]);
+    b[11] = lane_pair_of(t->Phi[86], t->Phi[86]);
+    b[12] = lane_pair_of(t->Phi[87], t->Phi[87]);
+    b[13] = lane_pair_of(t->Phi[88], t->Phi[88]);
+    b[14] = lane_pair_of(t->Phi[89], t->Phi[89]);
+    for (c = 0; c + 1 < 18; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[15][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -3375,114 +3149,43 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar propagate_row_5(const ned_doppler18_tra
 NED_DOPPLER18_BLOCK void phi_times_p_row_6(const ned_doppler18_filter *restrict f, const
         ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
 {
-    w->M[0] = t->Phi[90]*f->P[0][0] + t->Phi[91]*f->P[1][0] + t->Phi[92]*f->P[2][0] +
-            t->Phi[93]*f->P[3][0] + t->Phi[94]*f->P[4][0] + t->Phi[95]*f->P[5][0] +
-            t->Phi[96]*f->P[6][0] + t->Phi[97]*f->P[7][0] + t->Phi[98]*f->P[8][0] +
-            t->Phi[99]*f->P[9][0] + t->Phi[100]*f->P[10][0] + t->Phi[101]*f->P[11][0] +
-            t->Phi[102]*f->P[12][0] + t->Phi[103]*f->P[13][0] + t->Phi[104]*f->P[14][0] +
-            t->Phi[105]*f->P[15][0];
-    w->M[1] = t->Phi[90]*f->P[0][1] + t->Phi[91]*f->P[1][1] + t->Phi[92]*f->P[2][1] +
-            t->Phi[93]*f->P[3][1] + t->Phi[94]*f->P[4][1] + t->Phi[95]*f->P[5][1] +
-            t->Phi[96]*f->P[6][1] + t->Phi[97]*f->P[7][1] + t->Phi[98]*f->P[8][1] +
-            t->Phi[99]*f->P[9][1] + t->Phi[100]*f->P[10][1] + t->Phi[101]*f->P[11][1] +
-            t->Phi[102]*f->P[12][1] + t->Phi[103]*f->P[13][1] + t->Phi[104]*f->P[14][1] +
-            t->Phi[105]*f->P[15][1];
-    w->M[2] = t->Phi[90]*f->P[0][2] + t->Phi[91]*f->P[1][2] + t->Phi[92]*f->P[2][2] +
-            t->Phi[93]*f->P[3][2] + t->Phi[94]*f->P[4][2] + t->Phi[95]*f->P[5][2] +
-            t->Phi[96]*f->P[6][2] + t->Phi[97]*f->P[7][2] + t->Phi[98]*f->P[8][2] +
-            t->Phi[99]*f->P[9][2] + t->Phi[100]*f->P[10][2] + t->Phi[101]*f->P[11][2] +
-            t->Phi[102]*f->P[12][2] + t->Phi[103]*f->P[13][2] + t->Phi[104]*f->P[14][2] +
-            t->Phi[105]*f->P[15][2];
-    w->M[3] = t->Phi[90]*f->P[0][3] + t->Phi[91]*f->P[1][3] + t->Phi[92]*f->P[2][3] +
-            t->Phi[93]*f->P[3][3] + t->Phi[94]*f->P[4][3] + t->Phi[95]*f->P[5][3] +
-            t->Phi[96]*f->P[6][3] + t->Phi[97]*f->P[7][3] + t->Phi[98]*f->P[8][3] +
-            t->Phi[99]*f->P[9][3] + t->Phi[100]*f->P[10][3] + t->Phi[101]*f->P[11][3] +
-            t->Phi[102]*f->P[12][3] + t->Phi[103]*f->P[13][3] + t->Phi[104]*f->P[14][3] +
-            t->Phi[105]*f->P[15][3];
-    w->M[4] = t->Phi[90]*f->P[0][4] + t->Phi[91]*f->P[1][4] + t->Phi[92]*f->P[2][4] +
-            t->Phi[93]*f->P[3][4] + t->Phi[94]*f->P[4][4] + t->Phi[95]*f->P[5][4] +
-            t->Phi[96]*f->P[6][4] + t->Phi[97]*f->P[7][4] + t->Phi[98]*f->P[8][4] +
-            t->Phi[99]*f->P[9][4] + t->Phi[100]*f->P[10][4] + t->Phi[101]*f->P[11][4] +
-            t->Phi[102]*f->P[12][4] + t->Phi[103]*f->P[13][4] + t->Phi[104]*f->P[14][4] +
-            t->Phi[105]*f->P[15][4];
-    w->M[5] = t->Phi[90]*f->P[0][5] + t->Phi[91]*f->P[1][5] + t->Phi[92]*f->P[2][5] +
-            t->Phi[93]*f->P[3][5] + t->Phi[94]*f->P[4][5] + t->Phi[95]*f->P[5][5] +
-            t->Phi[96]*f->P[6][5] + t->Phi[97]*f->P[7][5] + t->Phi[98]*f->P[8][5] +
-            t->Phi[99]*f->P[9][5] + t->Phi[100]*f->P[10][5] + t->Phi[101]*f->P[11][5] +
-            t->Phi[102]*f->P[12][5] + t->Phi[103]*f->P[13][5] + t->Phi[104]*f->P[14][5] +
-            t->Phi[105]*f->P[15][5];
-    w->M[6] = t->Phi[90]*f->P[0][6] + t->Phi[91]*f->P[1][6] + t->Phi[92]*f->P[2][6] +
-            t->Phi[93]*f->P[3][6] + t->Phi[94]*f->P[4][6] + t->Phi[95]*f->P[5][6] +
-            t->Phi[96]*f->P[6][6] + t->Phi[97]*f->P[7][6] + t->Phi[98]*f->P[8][6] +
-            t->Phi[99]*f->P[9][6] + t->Phi[100]*f->P[10][6] + t->Phi[101]*f->P[11][6] +
-            t->Phi[102]*f->P[12][6] + t->Phi[103]*f->P[13][6] + t->Phi[104]*f->P[14][6] +
-            t->Phi[105]*f->P[15][6];
-    w->M[7] = t->Phi[90]*f->P[0][7] + t->Phi[91]*f->P[1][7] + t->Phi[92]*f->P[2][7] +
-            t->Phi[93]*f->P[3][7] + t->Phi[94]*f->P[4][7] + t->Phi[95]*f->P[5][7] +
-            t->Phi[96]*f->P[6][7] + t->Phi[97]*f->P[7][7] + t->Phi[98]*f->P[8][7] +
-            t->Phi[99]*f->P[9][7] + t->Phi[100]*f->P[10][7] + t->Phi[101]*f->P[11][7] +
-            t->Phi[102]*f->P[12][7] + t->Phi[103]*f->P[13][7] + t->Phi[104]*f->P[14][7] +
-            t->Phi[105]*f->P[15][7];
-    w->M[8] = t->Phi[90]*f->P[0][8] + t->Phi[91]*f->P[1][8] + t->Phi[92]*f->P[2][8] +
-            t->Phi[93]*f->P[3][8] + t->Phi[94]*f->P[4][8] + t->Phi[95]*f->P[5][8] +
-            t->Phi[96]*f->P[6][8] + t->Phi[97]*f->P[7][8] + t->Phi[98]*f->P[8][8] +
-            t->Phi[99]*f->P[9][8] + t->Phi[100]*f->P[10][8] + t->Phi[101]*f->P[11][8] +
-            t->Phi[102]*f->P[12][8] + t->Phi[103]*f->P[13][8] + t->Phi[104]*f->P[14][8] +
-            t->Phi[105]*f->P[15][8];
-    w->M[9] = t->Phi[90]*f->P[0][9] + t->Phi[91]*f->P[1][9] + t->Phi[92]*f->P[2][9] +
-            t->Phi[93]*f->P[3][9] + t->Phi[94]*f->P[4][9] + t->Phi[95]*f->P[5][9] +
-            t->Phi[96]*f->P[6][9] + t->Phi[97]*f->P[7][9] + t->Phi[98]*f->P[8][9] +
-            t->Phi[99]*f->P[9][9] + t->Phi[100]*f->P[10][9] + t->Phi[101]*f->P[11][9] +
-            t->Phi[102]*f->P[12][9] + t->Phi[103]*f->P[13][9] + t->Phi[104]*f->P[14][9] +
-            t->Phi[105]*f->P[15][9];
-    w->M[10] = t->Phi[90]*f->P[0][10] + t->Phi[91]*f->P[1][10] + t->Phi[92]*f->P[2][10] +
-            t->Phi[93]*f->P[3][10] + t->Phi[94]*f->P[4][10] + t->Phi[95]*f->P[5][10] +
-            t->Phi[96]*f->P[6][10] + t->Phi[97]*f->P[7][10] + t->Phi[98]*f->P[8][10] +
-            t->Phi[99]*f->P[9][10] + t->Phi[100]*f->P[10][10] + t->Phi[101]*f->P[11][10] +
-            t->Phi[102]*f->P[12][10] + t->Phi[103]*f->P[13][10] + t->Phi[104]*f->P[14][10] +
-            t->Phi[105]*f->P[15][10];
-    w->M[11] = t->Phi[90]*f->P[0][11] + t->Phi[91]*f->P[1][11] + t->Phi[92]*f->P[2][11] +
-            t->Phi[93]*f->P[3][11] + t->Phi[94]*f->P[4][11] + t->Phi[95]*f->P[5][11] +
-            t->Phi[96]*f->P[6][11] + t->Phi[97]*f->P[7][11] + t->Phi[98]*f->P[8][11] +
-            t->Phi[99]*f->P[9][11] + t->Phi[100]*f->P[10][11] + t->Phi[101]*f->P[11][11] +
-            t->Phi[102]*f->P[12][11] + t->Phi[103]*f->P[13][11] + t->Phi[104]*f->P[14][11] +
-            t->Phi[105]*f->P[15][11];
-    w->M[12] = t->Phi[90]*f->P[0][12] + t->Phi[91]*f->P[1][12] + t->Phi[92]*f->P[2][12] +
-            t->Phi[93]*f->P[3][12] + t->Phi[94]*f->P[4][12] + t->Phi[95]*f->P[5][12] +
-            t->Phi[96]*f->P[6][12] + t->Phi[97]*f->P[7][12] + t->Phi[98]*f->P[8][12] +
-            t->Phi[99]*f->P[9][12] + t->Phi[100]*f->P[10][12] + t->Phi[101]*f->P[11][12] +
-            t->Phi[102]*f->P[12][12] + t->Phi[103]*f->P[13][12] + t->Phi[104]*f->P[14][12] +
-            t->Phi[105]*f->P[15][12];
-    w->M[13] = t->Phi[90]*f->P[0][13] + t->Phi[91]*f->P[1][13] + t->Phi[92]*f->P[2][13] +
-            t->Phi[93]*f->P[3][13] + t->Phi[94]*f->P[4][13] + t->Phi[95]*f->P[5][13] +
-            t->Phi[96]*f->P[6][13] + t->Phi[97]*f->P[7][13] + t->Phi[98]*f->P[8][13] +
-            t->Phi[99]*f->P[9][13] + t->Phi[100]*f->P[10][13] + t->Phi[101]*f->P[11][13] +
-            t->Phi[102]*f->P[12][13] + t->Phi[103]*f->P[13][13] + t->Phi[104]*f->P[14][13] +
-            t->Phi[105]*f->P[15][13];
-    w->M[14] = t->Phi[90]*f->P[0][14] + t->Phi[91]*f->P[1][14] + t->Phi[92]*f->P[2][14] +
-            t->Phi[93]*f->P[3][14] + t->Phi[94]*f->P[4][14] + t->Phi[95]*f->P[5][14] +
-            t->Phi[96]*f->P[6][14] + t->Phi[97]*f->P[7][14] + t->Phi[98]*f->P[8][14] +
-            t->Phi[99]*f->P[9][14] + t->Phi[100]*f->P[10][14] + t->Phi[101]*f->P[11][14] +
-            t->Phi[102]*f->P[12][14] + t->Phi[103]*f->P[13][14] + t->Phi[104]*f->P[14][14] +
-            t->Phi[105]*f->P[15][14];
-    w->M[15] = t->Phi[90]*f->P[0][15] + t->Phi[91]*f->P[1][15] + t->Phi[92]*f->P[2][15] +
-            t->Phi[93]*f->P[3][15] + t->Phi[94]*f->P[4][15] + t->Phi[95]*f->P[5][15] +
-            t->Phi[96]*f->P[6][15] + t->Phi[97]*f->P[7][15] + t->Phi[98]*f->P[8][15] +
-            t->Phi[99]*f->P[9][15] + t->Phi[100]*f->P[10][15] + t->Phi[101]*f->P[11][15] +
-            t->Phi[102]*f->P[12][15] + t->Phi[103]*f->P[13][15] + t->Phi[104]*f->P[14][15] +
-            t->Phi[105]*f->P[15][15];
-    w->M[16] = t->Phi[90]*f->P[0][16] + t->Phi[91]*f->P[1][16] + t->Phi[92]*f->P[2][16] +
-            t->Phi[93]*f->P[3][16] + t->Phi[94]*f->P[4][16] + t->Phi[95]*f->P[5][16] +
-            t->Phi[96]*f->P[6][16] + t->Phi[97]*f->P[7][16] + t->Phi[98]*f->P[8][16] +
-            t->Phi[99]*f->P[9][16] + t->Phi[100]*f->P[10][16] + t->Phi[101]*f->P[11][16] +
-            t->Phi[102]*f->P[12][16] + t->Phi[103]*f->P[13][16] + t->Phi[104]*f->P[14][16] +
-            t->Phi[105]*f->P[15][16];
-    w->M[17] = t->Phi[90]*f->P[0][17] + t->Phi[91]*f->P[1][17] + t->Phi[92]*f->P[2][17] +
-            t->Phi[93]*f->P[3][17] + t->Phi[94]*f->P[4][17] + t->Phi[95]*f->P[5][17] +
-            t->Phi[96]*f->P[6][17] + t->Phi[97]*f->P[7][17] + t->Phi[98]*f->P[8][17] +
-            t->Phi[99]*f->P[9][17] + t->Phi[100]*f->P[10][17] + t->Phi[101]*f->P[11][17] +
-            t->Phi[102]*f->P[12][17] + t->Phi[103]*f->P[13][17] + t->Phi[104]*f->P[14][17] +
-            t->Phi[105]*f->P[15][17];
+    int c;
+    lane_pair b[16];
+    b[0] = lane_pair_of(t->Phi[90], t->Phi[90]);
+    b[1] = lane_pair_of(t->Phi[91], t->Phi[91]);
+    b[2] = lane_pair_of(t->Phi[92], t->Phi[92]);
+    b[3] = lane_pair_of(t->Phi[93], t->Phi[93]);
+    b[4] = lane_pair_of(t->Phi[94], t->Phi[94]);
+    b[5] = lane_pair_of(t->Phi[95], t->Phi[95]);
+    b[6] = lane_pair_of(t->Phi[96], t->Phi[96]);
+    b[7] = lane_pair_of(t->Phi[97], t->Phi[97]);
+    b[8] = lane_pair_of(t->Phi[98], t->Phi[98]);
+    b[9] = lane_pair_of(t->Phi[99], t->Phi[99]);
+    b[10] = lane_pair_of(t->Phi[100], t->Phi[100]);
+    b[11] = lane_pair_of(t->Phi[101], t->Phi[101]);
+    b[12] = lane_pair_of(t->Phi[102], t->Phi[102]);
+    b[13] = lane_pair_of(t->Phi[103], t->Phi[103]);
+    b[14] = lane_pair_of(t->Phi[104], t->Phi[104]);
+    b[15] = lane_pair_of(t->Phi[105], t->Phi[105]);
+    for (c = 0; c + 1 < 18; c += 2) {
+        lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[0][c]));
+        acc = lane_pair_add_product(acc, b[1], lane_pair_load(&f->P[1][c]));
+        acc = lane_pair_add_product(acc, b[2], lane_pair_load(&f->P[2][c]));
+        acc = lane_pair_add_product(acc, b[3], lane_pair_load(&f->P[3][c]));
+        acc = lane_pair_add_product(acc, b[4], lane_pair_load(&f->P[4][c]));
+        acc = lane_pair_add_product(acc, b[5], lane_pair_load(&f->P[5][c]));
+        acc = lane_pair_add_product(acc, b[6], lane_pair_load(&f->P[6][c]));
+        acc = lane_pair_add_product(acc, b[7], lane_pair_load(&f->P[7][c]));
+        acc = lane_pair_add_product(acc, b[8], lane_pair_load(&f->P[8][c]));
+        acc = lane_pair_add_product(acc, b[9], lane_pair_load(&f->P[9][c]));
+        acc = lane_pair_add_product(acc, b[10], lane_pair_load(&f->P[10][c]));
+        acc = lane_pair_add_product(acc, b[11], lane_pair_load(&f->P[11][c]));
+        acc = lane_pair_add_product(acc, b[12], lane_pair_load(&f->P[12][c]));
+        acc = lane_pair_add_product(acc, b[13], lane_pair_load(&f->P[13][c]));
+        acc = lane_pair_add_product(acc, b[14], lane_pair_load(&f->P[14][c]));
+        acc = lane_pair_add_product(acc, b[15], lane_pair_load(&f->P[15][c]));
+        lane_pair_store(&w->M[c], acc);
+    }
 }
 
 /* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
@@ -3521,17 +3224,12 @@ static ned_doppler18_scalar propagate_row_7(const ned_doppler18_filter *restrict
         ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;
-    v = f->P[7][7]; w->Pn[105] = v; check += v;
-    v = f->P[7][8]; w->Pn[106] = v; check += v;
-    v = f->P[7][9]; w->Pn[107] = v; check += v;
     v = f->P[7][10]*t->Phi[109]; w->Pn[108] = v; check += v;
     v = f->P[7][11]*t->Phi[110]; w->Pn[109] = v; check += v;
     v = f->P[7][12]*t->Phi[111]; w->Pn[110] = v; check += v;
     v = f->P[7][13]*t->Phi[112]; w->Pn[111] = v; check += v;
     v = f->P[7][14]*t->Phi[113]; w->Pn[112] = v; check += v;
     v = f->P[7][15]*t->Phi[114]; w->Pn[113] = v; check += v;
-    v = f->P[7][16]; w->Pn[114] = v; check += v;
-    v = f->P[7][17]; w->Pn[115] = v; check += v;
     return check - check;
 }
 
@@ -3541,16 +3239,12 @@ static ned_doppler18_scalar propagate_row_8(const ned_doppler18_filter *restrict
         ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;
-    v = f->P[8][8]; w->Pn[116] = v; check += v;
-    v = f->P[8][9]; w->Pn[117] = v; check += v;
     v = f->P[8][10]*t->Phi[109]; w->Pn[118] = v; check += v;
     v = f->P[8][11]*t->Phi[110]; w->Pn[119] = v; check += v;
     v = f->P[8][12]*t->Phi[111]; w->Pn[120] = v; check += v;
     v = f->P[8][13]*t->Phi[112]; w->Pn[121] = v; check += v;
     v = f->P[8][14]*t->Phi[113]; w->Pn[122] = v; check += v;
     v = f->P[8][15]*t->Phi[114]; w->Pn[123] = v; check += v;
-    v = f->P[8][16]; w->Pn[124] = v; check += v;
-    v = f->P[8][17]; w->Pn[125] = v; check += v;
     return check - check;
 }
 
@@ -3560,15 +3254,12 @@ static ned_doppler18_scalar propagate_row_9(const ned_doppler18_filter *restrict
         ned_doppler18_transition *restrict t, ned_doppler18_filter_scratch *restrict w)
 {
     ned_doppler18_scalar v, check = 0.0;
-    v = f->P[9][9]; w->Pn[126] = v; check += v;
     v = f->P[9][10]*t->Phi[109]; w->Pn[127] = v; check += v;
     v = f->P[9][11]*t->Phi[110]; w->Pn[128] = v; check += v;
     v = f->P[9][12]*t->Phi[111]; w->Pn[129] = v; check += v;
     v = f->P[9][13]*t->Phi[112]; w->Pn[130] = v; check += v;
     v = f->P[9][14]*t->Phi[113]; w->Pn[131] = v; check += v;
     v = f->P[9][15]*t->Phi[114]; w->Pn[132] = v; check += v;
-    v = f->P[9][16]; w->Pn[133] = v; check += v;
-    v = f->P[9][17]; w->Pn[134] = v; check += v;
     return check - check;
 }
 
@@ -3797,27 +3488,6 @@ static ned_doppler18_scalar propagate_row_15(const ned_doppler18_transition *res
     return check - check;
 }
 
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ned_doppler18_scalar propagate_row_16(const ned_doppler18_filter *restrict f,
-        ned_doppler18_filter_scratch *restrict w)
-{
-    ned_doppler18_scalar v, check = 0.0;
-    v = f->P[16][16]; w->Pn[168] = v; check += v;
-    v = f->P[16][17]; w->Pn[169] = v; check += v;
-    return check - check;
-}
-
-/* Returns 0 when the sum of the values it stored is finite (then every one is), NaN otherwise
-   (a value that is not finite, or an overflow of the sum: predict then decides entry by entry). */
-static ned_doppler18_scalar propagate_row_17(const ned_doppler18_filter *restrict f,
-        ned_doppler18_filter_scratch *restrict w)
-{
-    ned_doppler18_scalar v, check = 0.0;
-    v = f->P[17][17]; w->Pn[170] = v; check += v;
-    return check - check;
-}
-
 int ned_doppler18_predict(ned_doppler18_filter *restrict f, const ned_doppler18_transition *restrict
         t,
                 ned_doppler18_workspace *restrict work)
@@ -3826,6 +3496,7 @@ int ned_doppler18_predict(ned_doppler18_filter *restrict f, const ned_doppler18_
     ned_doppler18_scalar check = 0.0;
     modelgen_bits signs;
     ned_doppler18_scalar sum_check = 0.0;
+    ned_doppler18_scalar kept[2] = { 0.0, 0.0 }, kept_check;
     /* a negative variance of Q_d is refused, as set_covariance refuses a negative P_ii */
     signs = modelgen_bits_of(t->Qd[0]);
     signs |= modelgen_bits_of(t->Qd[18]);
@@ -3903,17 +3574,78 @@ int ned_doppler18_predict(ned_doppler18_filter *restrict f, const ned_doppler18_
     sum_check += propagate_row_14(t, w);
     phi_times_p_row_15(f, t, w);
     sum_check += propagate_row_15(t, w);
-    sum_check += propagate_row_16(f, w);
-    sum_check += propagate_row_17(f, w);
     /* a row's sum that is not finite: a value that is not, or an overflow of finite values */
-    if (sum_check != 0.0) {
+    if (sum_check != 0.0) { /* the entries of Pn computed (the kept pairs are not) */
         int e;
         sum_check = 0.0;
-        for (e = 0; e < NED_DOPPLER18_N_PACKED; ++e) {
+        for (e = 0; e < 18; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 18; e < 35; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 35; e < 51; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 51; e < 66; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 66; e < 80; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 80; e < 93; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 93; e < 105; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 108; e < 114; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 118; e < 124; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 127; e < 133; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 135; e < 143; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 143; e < 150; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 150; e < 156; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 156; e < 161; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 161; e < 165; ++e) {
+            sum_check += w->Pn[e] - w->Pn[e];
+        }
+        for (e = 165; e < 168; ++e) {
             sum_check += w->Pn[e] - w->Pn[e];
         }
     }
     check += sum_check;
+    /* the pairs of random constants without noise, P_n = P there: left in P, checked finite */
+    kept[0] += f->P[16][16];
+    kept[1] += f->P[16][17];
+    kept[0] += f->P[17][17];
+    kept_check = kept[0] + kept[1];
+    if (kept_check - kept_check != 0.0) {
+        int j;
+        kept_check = 0.0;
+        for (j = 16; j < 18; ++j) {
+            kept_check += f->P[16][j] - f->P[16][j];
+        }
+        for (j = 17; j < 18; ++j) {
+            kept_check += f->P[17][j] - f->P[17][j];
+        }
+    } else {
+        kept_check = 0.0;
+    }
+    check += kept_check;
     if (check != 0.0) {
         return NED_DOPPLER18_ERR_NONFINITE;
     }
@@ -4036,36 +3768,27 @@ int ned_doppler18_predict(ned_doppler18_filter *restrict f, const ned_doppler18_
     f->P[15][6] = f->P[6][15];
     f->P[16][6] = f->P[6][16];
     f->P[17][6] = f->P[6][17];
-    memcpy(&f->P[7][7], &w->Pn[105], 11 * sizeof w->Pn[0]);
-    f->P[8][7] = f->P[7][8];
-    f->P[9][7] = f->P[7][9];
+    memcpy(&f->P[7][10], &w->Pn[108], 6 * sizeof w->Pn[0]);
     f->P[10][7] = f->P[7][10];
     f->P[11][7] = f->P[7][11];
     f->P[12][7] = f->P[7][12];
     f->P[13][7] = f->P[7][13];
     f->P[14][7] = f->P[7][14];
     f->P[15][7] = f->P[7][15];
-    f->P[16][7] = f->P[7][16];
-    f->P[17][7] = f->P[7][17];
-    memcpy(&f->P[8][8], &w->Pn[116], 10 * sizeof w->Pn[0]);
-    f->P[9][8] = f->P[8][9];
+    memcpy(&f->P[8][10], &w->Pn[118], 6 * sizeof w->Pn[0]);
     f->P[10][8] = f->P[8][10];
     f->P[11][8] = f->P[8][11];
     f->P[12][8] = f->P[8][12];
     f->P[13][8] = f->P[8][13];
     f->P[14][8] = f->P[8][14];
     f->P[15][8] = f->P[8][15];
-    f->P[16][8] = f->P[8][16];
-    f->P[17][8] = f->P[8][17];
-    memcpy(&f->P[9][9], &w->Pn[126], 9 * sizeof w->Pn[0]);
+    memcpy(&f->P[9][10], &w->Pn[127], 6 * sizeof w->Pn[0]);
     f->P[10][9] = f->P[9][10];
     f->P[11][9] = f->P[9][11];
     f->P[12][9] = f->P[9][12];
     f->P[13][9] = f->P[9][13];
     f->P[14][9] = f->P[9][14];
     f->P[15][9] = f->P[9][15];
-    f->P[16][9] = f->P[9][16];
-    f->P[17][9] = f->P[9][17];
     memcpy(&f->P[10][10], &w->Pn[135], 8 * sizeof w->Pn[0]);
     f->P[11][10] = f->P[10][11];
     f->P[12][10] = f->P[10][12];
@@ -4099,9 +3822,6 @@ int ned_doppler18_predict(ned_doppler18_filter *restrict f, const ned_doppler18_
     memcpy(&f->P[15][15], &w->Pn[165], 3 * sizeof w->Pn[0]);
     f->P[16][15] = f->P[15][16];
     f->P[17][15] = f->P[15][17];
-    memcpy(&f->P[16][16], &w->Pn[168], 2 * sizeof w->Pn[0]);
-    f->P[17][16] = f->P[16][17];
-    memcpy(&f->P[17][17], &w->Pn[170], 1 * sizeof w->Pn[0]);
     return NED_DOPPLER18_OK;
 }
 

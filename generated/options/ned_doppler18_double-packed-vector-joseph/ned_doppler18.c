@@ -948,26 +948,75 @@ NED_DOPPLER18_BLOCK void horner_last_into_S(ned_doppler18_discretize_scratch *re
 
 NED_DOPPLER18_BLOCK void horner_unit_columns(ned_doppler18_discretize_scratch *restrict w)
 {
-    w->S[90] = w->term[1][0]*w->fh[4] + w->term[1][1]*w->fh[13] + w->term[1][2]*w->fh[23];
-    w->S[91] = w->term[1][0]*w->fh[5] + w->term[1][1]*w->fh[14] + w->term[1][2]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[90], pair);
+    }
     w->S[92] = w->term[1][0]*w->fh[6] + w->term[1][1]*w->fh[15] + w->term[1][2]*w->fh[25];
-    w->S[93] = w->term[1][12]*w->fh[4] + w->term[1][13]*w->fh[13] + w->term[1][14]*w->fh[23];
-    w->S[94] = w->term[1][12]*w->fh[5] + w->term[1][13]*w->fh[14] + w->term[1][14]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][12], w->term[1][12]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][14], w->term[1][14]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[93], pair);
+    }
     w->S[95] = w->term[1][12]*w->fh[6] + w->term[1][13]*w->fh[15] + w->term[1][14]*w->fh[25];
-    w->S[96] = w->term[1][24]*w->fh[4] + w->term[1][25]*w->fh[13] + w->term[1][26]*w->fh[23];
-    w->S[97] = w->term[1][24]*w->fh[5] + w->term[1][25]*w->fh[14] + w->term[1][26]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[96], pair);
+    }
     w->S[98] = w->term[1][24]*w->fh[6] + w->term[1][25]*w->fh[15] + w->term[1][26]*w->fh[25];
-    w->S[99] = w->term[1][36]*w->fh[4] + w->term[1][37]*w->fh[13] + w->term[1][38]*w->fh[23];
-    w->S[100] = w->term[1][36]*w->fh[5] + w->term[1][37]*w->fh[14] + w->term[1][38]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][36], w->term[1][36]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][38], w->term[1][38]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[99], pair);
+    }
     w->S[101] = w->term[1][36]*w->fh[6] + w->term[1][37]*w->fh[15] + w->term[1][38]*w->fh[25];
-    w->S[102] = w->term[1][48]*w->fh[4] + w->term[1][49]*w->fh[13] + w->term[1][50]*w->fh[23];
-    w->S[103] = w->term[1][48]*w->fh[5] + w->term[1][49]*w->fh[14] + w->term[1][50]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[102], pair);
+    }
     w->S[104] = w->term[1][48]*w->fh[6] + w->term[1][49]*w->fh[15] + w->term[1][50]*w->fh[25];
-    w->S[105] = w->term[1][60]*w->fh[4] + w->term[1][61]*w->fh[13] + w->term[1][62]*w->fh[23];
-    w->S[106] = w->term[1][60]*w->fh[5] + w->term[1][61]*w->fh[14] + w->term[1][62]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][60], w->term[1][60]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][62], w->term[1][62]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[105], pair);
+    }
     w->S[107] = w->term[1][60]*w->fh[6] + w->term[1][61]*w->fh[15] + w->term[1][62]*w->fh[25];
-    w->S[109] = w->term[1][72]*w->fh[4] + w->term[1][73]*w->fh[13] + w->term[1][74]*w->fh[23];
-    w->S[110] = w->term[1][72]*w->fh[5] + w->term[1][73]*w->fh[14] + w->term[1][74]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][72], w->term[1][72]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][73], w->term[1][73]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][74], w->term[1][74]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[109], pair);
+    }
     w->S[111] = w->term[1][72]*w->fh[6] + w->term[1][73]*w->fh[15] + w->term[1][74]*w->fh[25];
 }
 
@@ -1021,26 +1070,75 @@ NED_DOPPLER18_BLOCK void horner_transition(ned_doppler18_transition *restrict t,
     t->Phi[112] = w->fh[51]*w->S[87];
     t->Phi[113] = w->fh[52]*w->S[88];
     t->Phi[114] = w->fh[53]*w->S[89];
-    t->Phi[6] = w->S[0]*w->fh[4] + w->S[1]*w->fh[13] + w->S[2]*w->fh[23];
-    t->Phi[7] = w->S[0]*w->fh[5] + w->S[1]*w->fh[14] + w->S[2]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[6], pair);
+    }
     t->Phi[8] = w->S[0]*w->fh[6] + w->S[1]*w->fh[15] + w->S[2]*w->fh[25];
-    t->Phi[21] = w->S[12]*w->fh[4] + w->S[13]*w->fh[13] + w->S[14]*w->fh[23];
-    t->Phi[22] = w->S[12]*w->fh[5] + w->S[13]*w->fh[14] + w->S[14]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[12], w->S[12]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[14], w->S[14]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[21], pair);
+    }
     t->Phi[23] = w->S[12]*w->fh[6] + w->S[13]*w->fh[15] + w->S[14]*w->fh[25];
-    t->Phi[36] = w->S[24]*w->fh[4] + w->S[25]*w->fh[13] + w->S[26]*w->fh[23];
-    t->Phi[37] = w->S[24]*w->fh[5] + w->S[25]*w->fh[14] + w->S[26]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[36], pair);
+    }
     t->Phi[38] = w->S[24]*w->fh[6] + w->S[25]*w->fh[15] + w->S[26]*w->fh[25];
-    t->Phi[51] = w->S[36]*w->fh[4] + w->S[37]*w->fh[13] + w->S[38]*w->fh[23];
-    t->Phi[52] = w->S[36]*w->fh[5] + w->S[37]*w->fh[14] + w->S[38]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[36], w->S[36]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[38], w->S[38]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[51], pair);
+    }
     t->Phi[53] = w->S[36]*w->fh[6] + w->S[37]*w->fh[15] + w->S[38]*w->fh[25];
-    t->Phi[66] = w->S[48]*w->fh[4] + w->S[49]*w->fh[13] + w->S[50]*w->fh[23];
-    t->Phi[67] = w->S[48]*w->fh[5] + w->S[49]*w->fh[14] + w->S[50]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[66], pair);
+    }
     t->Phi[68] = w->S[48]*w->fh[6] + w->S[49]*w->fh[15] + w->S[50]*w->fh[25];
-    t->Phi[81] = w->S[60]*w->fh[4] + w->S[61]*w->fh[13] + w->S[62]*w->fh[23];
-    t->Phi[82] = w->S[60]*w->fh[5] + w->S[61]*w->fh[14] + w->S[62]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[60], w->S[60]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[62], w->S[62]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[81], pair);
+    }
     t->Phi[83] = w->S[60]*w->fh[6] + w->S[61]*w->fh[15] + w->S[62]*w->fh[25];
-    t->Phi[97] = w->S[72]*w->fh[4] + w->S[73]*w->fh[13] + w->S[74]*w->fh[23];
-    t->Phi[98] = w->S[72]*w->fh[5] + w->S[73]*w->fh[14] + w->S[74]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[97], pair);
+    }
     t->Phi[99] = w->S[72]*w->fh[6] + w->S[73]*w->fh[15] + w->S[74]*w->fh[25];
     t->Phi[96] = 0;
     t->Phi[106] = one;
@@ -1656,12 +1754,18 @@ NED_DOPPLER18_BLOCK void process_noise(const ned_doppler18_matrices *restrict m,
         ned_doppler18_transition *restrict t, ned_doppler18_discretize_scratch *restrict w, const
         ned_doppler18_scalar T)
 {
-    w->term[1][48] = T*m->q[0];
-    w->term[1][49] = T*m->q[1];
-    w->term[1][50] = T*m->q[2];
-    w->term[1][51] = T*m->q[3];
-    w->term[1][52] = T*m->q[4];
-    w->term[1][53] = T*m->q[5];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[0]));
+        lane_pair_store(&w->term[1][48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[2]));
+        lane_pair_store(&w->term[1][50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&m->q[4]));
+        lane_pair_store(&w->term[1][52], pair);
+    }
     w->term[1][0] = w->term[0][0]*w->term[1][48];
     w->term[1][1] = w->term[0][1]*w->term[1][49];
     w->term[1][2] = w->term[0][2]*w->term[1][50];

@@ -943,26 +943,75 @@ NED_DOPPLER18_BLOCK void horner_last_into_S(ned_doppler18_discretize_scratch *re
 
 NED_DOPPLER18_BLOCK void horner_unit_columns(ned_doppler18_discretize_scratch *restrict w)
 {
-    w->S[90] = w->term[1][0]*w->fh[4] + w->term[1][1]*w->fh[13] + w->term[1][2]*w->fh[23];
-    w->S[91] = w->term[1][0]*w->fh[5] + w->term[1][1]*w->fh[14] + w->term[1][2]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[90], pair);
+    }
     w->S[92] = w->term[1][0]*w->fh[6] + w->term[1][1]*w->fh[15] + w->term[1][2]*w->fh[25];
-    w->S[93] = w->term[1][12]*w->fh[4] + w->term[1][13]*w->fh[13] + w->term[1][14]*w->fh[23];
-    w->S[94] = w->term[1][12]*w->fh[5] + w->term[1][13]*w->fh[14] + w->term[1][14]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][12], w->term[1][12]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][14], w->term[1][14]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[93], pair);
+    }
     w->S[95] = w->term[1][12]*w->fh[6] + w->term[1][13]*w->fh[15] + w->term[1][14]*w->fh[25];
-    w->S[96] = w->term[1][24]*w->fh[4] + w->term[1][25]*w->fh[13] + w->term[1][26]*w->fh[23];
-    w->S[97] = w->term[1][24]*w->fh[5] + w->term[1][25]*w->fh[14] + w->term[1][26]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[96], pair);
+    }
     w->S[98] = w->term[1][24]*w->fh[6] + w->term[1][25]*w->fh[15] + w->term[1][26]*w->fh[25];
-    w->S[99] = w->term[1][36]*w->fh[4] + w->term[1][37]*w->fh[13] + w->term[1][38]*w->fh[23];
-    w->S[100] = w->term[1][36]*w->fh[5] + w->term[1][37]*w->fh[14] + w->term[1][38]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][36], w->term[1][36]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][38], w->term[1][38]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[99], pair);
+    }
     w->S[101] = w->term[1][36]*w->fh[6] + w->term[1][37]*w->fh[15] + w->term[1][38]*w->fh[25];
-    w->S[102] = w->term[1][48]*w->fh[4] + w->term[1][49]*w->fh[13] + w->term[1][50]*w->fh[23];
-    w->S[103] = w->term[1][48]*w->fh[5] + w->term[1][49]*w->fh[14] + w->term[1][50]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[102], pair);
+    }
     w->S[104] = w->term[1][48]*w->fh[6] + w->term[1][49]*w->fh[15] + w->term[1][50]*w->fh[25];
-    w->S[105] = w->term[1][60]*w->fh[4] + w->term[1][61]*w->fh[13] + w->term[1][62]*w->fh[23];
-    w->S[106] = w->term[1][60]*w->fh[5] + w->term[1][61]*w->fh[14] + w->term[1][62]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][60], w->term[1][60]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][62], w->term[1][62]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[105], pair);
+    }
     w->S[107] = w->term[1][60]*w->fh[6] + w->term[1][61]*w->fh[15] + w->term[1][62]*w->fh[25];
-    w->S[109] = w->term[1][72]*w->fh[4] + w->term[1][73]*w->fh[13] + w->term[1][74]*w->fh[23];
-    w->S[110] = w->term[1][72]*w->fh[5] + w->term[1][73]*w->fh[14] + w->term[1][74]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][72], w->term[1][72]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][73], w->term[1][73]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][74], w->term[1][74]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&w->S[109], pair);
+    }
     w->S[111] = w->term[1][72]*w->fh[6] + w->term[1][73]*w->fh[15] + w->term[1][74]*w->fh[25];
 }
 
@@ -1016,26 +1065,75 @@ NED_DOPPLER18_BLOCK void horner_transition(ned_doppler18_transition *restrict t,
     t->Phi[112] = w->fh[51]*w->S[87];
     t->Phi[113] = w->fh[52]*w->S[88];
     t->Phi[114] = w->fh[53]*w->S[89];
-    t->Phi[6] = w->S[0]*w->fh[4] + w->S[1]*w->fh[13] + w->S[2]*w->fh[23];
-    t->Phi[7] = w->S[0]*w->fh[5] + w->S[1]*w->fh[14] + w->S[2]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[6], pair);
+    }
     t->Phi[8] = w->S[0]*w->fh[6] + w->S[1]*w->fh[15] + w->S[2]*w->fh[25];
-    t->Phi[21] = w->S[12]*w->fh[4] + w->S[13]*w->fh[13] + w->S[14]*w->fh[23];
-    t->Phi[22] = w->S[12]*w->fh[5] + w->S[13]*w->fh[14] + w->S[14]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[12], w->S[12]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[14], w->S[14]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[21], pair);
+    }
     t->Phi[23] = w->S[12]*w->fh[6] + w->S[13]*w->fh[15] + w->S[14]*w->fh[25];
-    t->Phi[36] = w->S[24]*w->fh[4] + w->S[25]*w->fh[13] + w->S[26]*w->fh[23];
-    t->Phi[37] = w->S[24]*w->fh[5] + w->S[25]*w->fh[14] + w->S[26]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[36], pair);
+    }
     t->Phi[38] = w->S[24]*w->fh[6] + w->S[25]*w->fh[15] + w->S[26]*w->fh[25];
-    t->Phi[51] = w->S[36]*w->fh[4] + w->S[37]*w->fh[13] + w->S[38]*w->fh[23];
-    t->Phi[52] = w->S[36]*w->fh[5] + w->S[37]*w->fh[14] + w->S[38]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[36], w->S[36]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[38], w->S[38]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[51], pair);
+    }
     t->Phi[53] = w->S[36]*w->fh[6] + w->S[37]*w->fh[15] + w->S[38]*w->fh[25];
-    t->Phi[66] = w->S[48]*w->fh[4] + w->S[49]*w->fh[13] + w->S[50]*w->fh[23];
-    t->Phi[67] = w->S[48]*w->fh[5] + w->S[49]*w->fh[14] + w->S[50]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[66], pair);
+    }
     t->Phi[68] = w->S[48]*w->fh[6] + w->S[49]*w->fh[15] + w->S[50]*w->fh[25];
-    t->Phi[81] = w->S[60]*w->fh[4] + w->S[61]*w->fh[13] + w->S[62]*w->fh[23];
-    t->Phi[82] = w->S[60]*w->fh[5] + w->S[61]*w->fh[14] + w->S[62]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[60], w->S[60]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[62], w->S[62]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[81], pair);
+    }
     t->Phi[83] = w->S[60]*w->fh[6] + w->S[61]*w->fh[15] + w->S[62]*w->fh[25];
-    t->Phi[97] = w->S[72]*w->fh[4] + w->S[73]*w->fh[13] + w->S[74]*w->fh[23];
-    t->Phi[98] = w->S[72]*w->fh[5] + w->S[73]*w->fh[14] + w->S[74]*w->fh[24];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
+                lane_pair_load(&w->fh[4]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
+                lane_pair_load(&w->fh[13]));
+        pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
+                lane_pair_load(&w->fh[23]));
+        lane_pair_store(&t->Phi[97], pair);
+    }
     t->Phi[99] = w->S[72]*w->fh[6] + w->S[73]*w->fh[15] + w->S[74]*w->fh[25];
     t->Phi[96] = 0;
     t->Phi[106] = one;
@@ -1650,48 +1748,90 @@ NED_DOPPLER18_BLOCK void noise_input(const ned_doppler18_matrices *restrict m,
 NED_DOPPLER18_BLOCK void noise_input_times_step(ned_doppler18_transition *restrict t, const
         ned_doppler18_discretize_scratch *restrict w, const ned_doppler18_scalar T)
 {
-    t->Gamma[0][0] = T*w->term[0][0];
-    t->Gamma[0][1] = T*w->term[0][1];
-    t->Gamma[0][2] = T*w->term[0][2];
-    t->Gamma[0][3] = T*w->term[0][3];
-    t->Gamma[0][4] = T*w->term[0][4];
-    t->Gamma[0][5] = T*w->term[0][5];
-    t->Gamma[1][0] = T*w->term[0][6];
-    t->Gamma[1][1] = T*w->term[0][7];
-    t->Gamma[1][2] = T*w->term[0][8];
-    t->Gamma[1][3] = T*w->term[0][9];
-    t->Gamma[1][4] = T*w->term[0][10];
-    t->Gamma[1][5] = T*w->term[0][11];
-    t->Gamma[2][0] = T*w->term[0][12];
-    t->Gamma[2][1] = T*w->term[0][13];
-    t->Gamma[2][2] = T*w->term[0][14];
-    t->Gamma[2][3] = T*w->term[0][15];
-    t->Gamma[2][4] = T*w->term[0][16];
-    t->Gamma[2][5] = T*w->term[0][17];
-    t->Gamma[3][0] = T*w->term[0][18];
-    t->Gamma[3][1] = T*w->term[0][19];
-    t->Gamma[3][2] = T*w->term[0][20];
-    t->Gamma[3][3] = T*w->term[0][21];
-    t->Gamma[3][4] = T*w->term[0][22];
-    t->Gamma[3][5] = T*w->term[0][23];
-    t->Gamma[4][0] = T*w->term[0][24];
-    t->Gamma[4][1] = T*w->term[0][25];
-    t->Gamma[4][2] = T*w->term[0][26];
-    t->Gamma[4][3] = T*w->term[0][27];
-    t->Gamma[4][4] = T*w->term[0][28];
-    t->Gamma[4][5] = T*w->term[0][29];
-    t->Gamma[5][0] = T*w->term[0][30];
-    t->Gamma[5][1] = T*w->term[0][31];
-    t->Gamma[5][2] = T*w->term[0][32];
-    t->Gamma[5][3] = T*w->term[0][33];
-    t->Gamma[5][4] = T*w->term[0][34];
-    t->Gamma[5][5] = T*w->term[0][35];
-    t->Gamma[6][0] = T*w->term[0][36];
-    t->Gamma[6][1] = T*w->term[0][37];
-    t->Gamma[6][2] = T*w->term[0][38];
-    t->Gamma[6][3] = T*w->term[0][39];
-    t->Gamma[6][4] = T*w->term[0][40];
-    t->Gamma[6][5] = T*w->term[0][41];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][0]));
+        lane_pair_store(&t->Gamma[0][0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][2]));
+        lane_pair_store(&t->Gamma[0][2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][4]));
+        lane_pair_store(&t->Gamma[0][4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][6]));
+        lane_pair_store(&t->Gamma[1][0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][8]));
+        lane_pair_store(&t->Gamma[1][2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][10]));
+        lane_pair_store(&t->Gamma[1][4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][12]));
+        lane_pair_store(&t->Gamma[2][0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][14]));
+        lane_pair_store(&t->Gamma[2][2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][16]));
+        lane_pair_store(&t->Gamma[2][4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][18]));
+        lane_pair_store(&t->Gamma[3][0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][20]));
+        lane_pair_store(&t->Gamma[3][2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][22]));
+        lane_pair_store(&t->Gamma[3][4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][24]));
+        lane_pair_store(&t->Gamma[4][0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][26]));
+        lane_pair_store(&t->Gamma[4][2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][28]));
+        lane_pair_store(&t->Gamma[4][4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][30]));
+        lane_pair_store(&t->Gamma[5][0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][32]));
+        lane_pair_store(&t->Gamma[5][2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][34]));
+        lane_pair_store(&t->Gamma[5][4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][36]));
+        lane_pair_store(&t->Gamma[6][0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][38]));
+        lane_pair_store(&t->Gamma[6][2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(T, T), lane_pair_load(&w->term[0][40]));
+        lane_pair_store(&t->Gamma[6][4], pair);
+    }
     t->Gamma[10][0] = T*w->term[0][42];
     t->Gamma[11][1] = T*w->term[0][43];
     t->Gamma[12][2] = T*w->term[0][44];

@@ -9,7 +9,7 @@ from modelgen.codegen.backends.c.literals import c_number, scalar_bytes, scalar_
 from modelgen.codegen.backends.c.printer import POINTERS, CPrinter, accessors, c_declarator, c_lines, c_ref, c_statement
 from modelgen.codegen.description import FilterDescription, named
 from modelgen.codegen.discretize_kernels import HORNER_LAST, DiscretizeBlock, SegmentAssign, horner_level_name, scalar_statements
-from modelgen.codegen.kernels import MIN_LANE_PAIRS, CheckedAssign, KernelBlock, compact_predict_tables, lane_split
+from modelgen.codegen.kernels import MIN_LANE_PAIRS, Assign, CheckedAssign, KernelBlock, Ref, compact_predict_tables, lane_split
 from modelgen.codegen.compact_discretize import CompactDiscretizeTables
 from modelgen.codegen.layout import CLayout, CompactDiscretizeSizes, UnrolledDiscretizeSizes, c_layout, packed_index, phi_entries
 from modelgen.codegen.smoother import reset_inverse
@@ -97,6 +97,59 @@ def two_lane_sums(block: KernelBlock) -> bool:
     return block.two_lanes and any(lane_split(s.terms)[0] for s in block.statements if not isinstance(s, SegmentAssign))
 
 
+#: A row of M = Phi P with fewer terms (a Markov state's, one) stays scalar sums, which gcc -O2 pairs
+#: itself: 18 states, the loop for those rows too cost 160 instructions a cycle more.
+MIN_BROADCAST_TERMS = 2
+
+
+def _broadcast_row(block: KernelBlock) -> list[tuple[Ref, int]] | None:
+    """(Phi entry, row k of P) of each term when the block is row i of M = Phi P in full storage, else None.
+
+    That is: one statement per column c = 0..N-1, M[c] = sum_q Phi(e_q) P[k_q][c]
+    with the same factors and rows for every column (``phi_times_p_row_i``).
+    """
+    statements = block.statements
+    if not statements or not all(isinstance(s, Assign) and s.target.array == "M" and s.target.index == (c,)
+                                 for c, s in enumerate(statements)):
+        return None
+    first = statements[0].terms
+    if not first or not all(len(t) == 2 and t[0].owner == "transition" and t[1].owner == "filter" and t[1].array == "P"
+                            and len(t[1].index) == 2 and t[1].index[1] == 0 for t in first):
+        return None
+    row = [(factor, source.index[0]) for factor, source in first]
+    for c, s in enumerate(statements):
+        if s.terms != tuple((factor, Ref("filter", "P", (k, c))) for factor, k in row):
+            return None
+    return row
+
+
+def m_row_lines(block: KernelBlock) -> list[str] | None:
+    """Row i of M = Phi P as a loop over column pairs: each factor Phi(i, k) broadcast once, then P's rows two columns a step.
+
+    The sums are those of the scalar statements, term by term in the same
+    order in each lane (so the same bits); a lane pair is an SSE2 vector
+    (runtime ``modelgen_lane_pair.h``), so each term is one load, one
+    multiplication and one addition for two columns (bench/bench_cycle.py,
+    32 states: 24,757 -> 22,720 instructions a cycle against the unrolled
+    scalar sums, whose 27 factors gcc -O2 spills and copies).  An odd N
+    leaves the last column to a scalar sum.  None when the block is not
+    such a row (packed storage, the UD form).
+    """
+    row = _broadcast_row(block)
+    if row is None or len(row) < MIN_BROADCAST_TERMS or len(block.statements) < 2:
+        return None
+    n = len(block.statements)
+    lines = ["int c;", f"lane_pair b[{len(row)}];"]
+    lines += [f"b[{q}] = lane_pair_of({c_ref(f)}, {c_ref(f)});" for q, (f, _) in enumerate(row)]
+    lines.append(f"for (c = 0; c + 1 < {n}; c += 2) {{")
+    lines.append(f"    lane_pair acc = lane_pair_product(b[0], lane_pair_load(&f->P[{row[0][1]}][c]));")
+    lines += [f"    acc = lane_pair_add_product(acc, b[{q}], lane_pair_load(&f->P[{k}][c]));" for q, (_, k) in enumerate(row) if q]
+    lines += ["    lane_pair_store(&w->M[c], acc);", "}"]
+    if n % 2:
+        lines += c_lines(block.statements[-1])
+    return lines
+
+
 def block_functions(blocks: list[KernelBlock], prefix: str) -> list[dict[str, object]]:
     """Static C functions for the unrolled kernel pieces, with the parameters each uses."""
     types = {"filter": f"const {prefix}_filter", "transition": f"const {prefix}_transition", "scratch": f"{prefix}_filter_scratch"}  # noqa: E501
@@ -108,7 +161,7 @@ def block_functions(blocks: list[KernelBlock], prefix: str) -> list[dict[str, ob
                 "name": block.name,
                 "signature": ", ".join(f"{types[o]} *restrict {POINTERS[o]}" for o in owners),
                 "arguments": ", ".join(POINTERS[o] for o in owners),
-                "lines": [line for s in block.statements for line in c_lines(s, two_lanes=block.two_lanes)],
+                "lines": m_row_lines(block) or [line for s in block.statements for line in c_lines(s, two_lanes=block.two_lanes)],
                 "lane_pairs": two_lane_sums(block),
                 "checked": block.checked,
                 "small": small_block(block.statements),
@@ -142,6 +195,40 @@ def qd_variance_check(n: int, prefix: str, zero: str, compact: bool) -> list[str
                     "        }", "    }", "}"]
 
 
+def _runs(columns: list[int]) -> list[tuple[int, int]]:
+    """Consecutive runs (first, past the last) of ascending columns."""
+    runs: list[list[int]] = []
+    for j in columns:
+        if runs and runs[-1][1] == j:
+            runs[-1][1] = j + 1
+        else:
+            runs.append([j, j + 1])
+    return [(a, b) for a, b in runs]
+
+
+def kept_check_lines(kept: list[tuple[int, int]], zero: str) -> list[str]:
+    """C lines of predict that check the pairs it leaves in P (``kernels.kept_pairs_to_check``) finite: ``kept_check`` 0 or NaN.
+
+    Their sum in two partial sums (one load and one add per entry) is finite
+    only if every entry is; a sum that is not (an entry that is not finite,
+    or an overflow of finite ones) is decided entry by entry.  predict
+    declares ``kept[2]`` (zero) and ``kept_check``.
+    """
+    if not kept:
+        return []
+    rows: dict[int, list[int]] = {}
+    for i, j in kept:
+        rows.setdefault(i, []).append(j)
+    lines = [f"kept[{k % 2}] += f->P[{i}][{j}];" for k, (i, j) in enumerate(kept)]
+    lines.append("kept_check = kept[0] + kept[1];")
+    lines += [f"if (kept_check - kept_check != {zero}) {{", "    int j;", f"    kept_check = {zero};"]
+    for i, columns in rows.items():
+        for a, b in _runs(columns):
+            lines += [f"    for (j = {a}; j < {b}; ++j) {{", f"        kept_check += f->P[{i}][j] - f->P[{i}][j];", "    }"]
+    lines += ["} else {", f"    kept_check = {zero};", "}"]
+    return lines
+
+
 def compact_tables(description: FilterDescription) -> dict[str, list[int]]:
     """Phi's CSR tables for the compact prediction kernels; empty when the prediction is unrolled."""
     return compact_predict_tables(description.structure) if description.compact else {}
@@ -153,6 +240,39 @@ def _segment_ref(ref) -> str:
     return f"{POINTERS[ref.owner]}->{ref.array}" + "".join(f"[{i}]" for i in head) + (f"[{offset}+k]" if offset else "[k]")
 
 
+def _shift(ref: Ref) -> Ref:
+    return Ref(ref.owner, ref.array, ref.index[:-1] + (ref.index[-1] + 1,))
+
+
+def _column_pair(first, second) -> bool:
+    """Whether two scalar statements are one in two lanes: x[p] and x[p+1], each term a common factor times y[q] and y[q+1].
+
+    Then both are one lane-pair sum with the common factors broadcast, term by
+    term in the same order in each lane (the same bits); the target is read
+    by no term (no aliasing between the lanes).
+    """
+    if not (type(first) is Assign and type(second) is Assign) or len(first.terms) != len(second.terms) or not first.terms:
+        return False
+    if not first.target.index or second.target != _shift(first.target):
+        return False
+    for a, b in zip(first.terms, second.terms):
+        if len(a) != 2 or len(b) != 2 or a[0] != b[0] or not a[1].index or b[1] != _shift(a[1]):
+            return False
+        if (a[0].owner, a[0].array) == (first.target.owner, first.target.array) or \
+                (a[1].owner, a[1].array) == (first.target.owner, first.target.array):
+            return False
+    return True
+
+
+def _column_pair_lines(first) -> list[str]:
+    """The C of two statements of :func:`_column_pair` (``first`` and its shift), as one lane-pair sum stored once."""
+    (f, s), *rest = first.terms
+    lines = ["{", f"    lane_pair pair = lane_pair_product(lane_pair_of({c_ref(f)}, {c_ref(f)}), lane_pair_load(&{c_ref(s)}));"]
+    lines += [f"    pair = lane_pair_add_product(pair, lane_pair_of({c_ref(f)}, {c_ref(f)}), lane_pair_load(&{c_ref(s)}));"
+              for f, s in rest]
+    return lines + [f"    lane_pair_store(&{c_ref(first.target)}, pair);", "}"]
+
+
 def discretize_lines(statements, read_back: bool = False, two_lanes: bool = False) -> list[str]:
     """C lines of a discretize block: scalar statements one per line, consecutive segments as one fixed-trip loop over k.
 
@@ -162,7 +282,18 @@ def discretize_lines(statements, read_back: bool = False, two_lanes: bool = Fals
     """
     lines = ["int k;"] if any(isinstance(s, SegmentAssign) for s in statements) else []
     loop = None  # the length of the loop being printed (consecutive segments of one length share it)
-    for s in statements:
+    statements = list(statements)
+    paired = set()  # the second statements of column pairs, printed with the first
+    for n, s in enumerate(statements):
+        if n in paired:
+            continue
+        if not read_back and n + 1 < len(statements) and _column_pair(s, statements[n + 1]):
+            if loop is not None:
+                lines.append("}")
+                loop = None
+            lines += _column_pair_lines(s)
+            paired.add(n + 1)
+            continue
         if isinstance(s, SegmentAssign):
             if loop != s.length:
                 lines += ["}"] if loop is not None else []
@@ -472,6 +603,9 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         "predict_state_commit": [c_statement(s) for s in state_commit],
         "probe_entry": structure.entries("Phi").index(probe),
         "covariance_commit_rows": description.covariance_commit,
+        "predict_commit_rows": description.predict_commit,
+        "predict_keeps": bool(description.kept_pairs),  # Pn's rescan covers the computed entries only
+        "kept_check": kept_check_lines(description.kept_pairs_to_check, spell["zero"]),
         "predict_blocks": predict_functions,
         "compact": bool(compact),
         "compact_tables": {**{k: _table(v) for k, v in compact.items()}, "nnz": max(len(compact.get("col", ())), 1)},
