@@ -432,7 +432,8 @@ def _verdict(passed: bool) -> str:
 
 
 def mechanizations_markdown(checks: MechanizationChecks) -> str:
-    lines = ["# Mechanizations cross-checked", "", __doc__.split("\n\n", 1)[1].split(":func:")[0].rstrip(), ""]
+    intro = re.sub(r":data:`(\w+)`", r"`\1`", __doc__.split("\n\n", 1)[1].split(":func:")[0].rstrip())
+    lines = ["# Mechanizations cross-checked", "", intro, ""]
     for check, title in CHECK_TITLES.items():
         rows = [c for c in checks.comparisons if c.check == check]
         lines += [f"## {title}", "", "| point | matrix | largest difference | bound | why | verdict |", "|---|---|---|---|---|---|"]
