@@ -257,7 +257,8 @@ def declared_scenario(derived: DerivedModel) -> CheckScenario | None:
     rng = np.random.default_rng(spec.seed + 1)  # not the measurement stream's seed
     x0 = np.sqrt(np.diag(P0)) * rng.standard_normal(derived.n_states)
     label = f"the model's check scenario ({spec.steps} steps of {spec.step_s:g} s)"
-    return CheckScenario(spec.parameter_values(), P0, step=spec.step_s, steps=spec.steps, seed=spec.seed, initial_state=x0, label=label)
+    return CheckScenario(spec.parameter_values(), P0, step=spec.step_s, steps=spec.steps, seed=spec.seed, initial_state=x0, label=label,
+                         where=spec.where)
 
 
 def check_scenario(derived: DerivedModel) -> CheckScenario:

@@ -23,7 +23,7 @@ sys.dont_write_bytecode = False
 REPO = Path(__file__).resolve().parents[1]
 
 #: Modules whose tests are handed to the workers one by one (they share no costly module fixture).
-SPREAD_MODULES = ("tests/test_corpus.py",)
+SPREAD_MODULES = ("tests/test_corpus.py", "tests/embedded/test_cppcheck.py")
 
 #: Tests handed out on their own, not with their module: each takes minutes and uses none of its module's
 #: fixtures, so that the rest of the module runs on another worker meanwhile.

@@ -379,3 +379,20 @@ def test_derive_out_onto_a_named_pipe_is_refused_and_the_pipe_kept(runner, tmp_p
     assert result.output.strip() == (f"modelgen: error: {pipe}: is a named pipe, and modelgen replaces only regular "
                                      "files (even with --force): move it away or give another --out")
     assert pipe.is_fifo() and sorted(p.name for p in tmp_path.iterdir()) == ["pipe"]
+
+
+def test_derive_out_onto_a_device_node_is_refused_and_the_node_kept(runner, tmp_path):
+    """Issue 28's own case: ``derive --out /dev/full --force``, on a copy of the node (mknod needs root: else skipped)."""
+    import os
+    import stat
+
+    device = tmp_path / "full"
+    try:
+        os.mknod(device, stat.S_IFCHR | 0o600, os.makedev(1, 7))  # /dev/full's major and minor numbers
+    except (PermissionError, OSError) as exc:
+        pytest.skip(f"cannot make a device node here: {exc}")
+    result = runner.invoke(main, ["derive", "ned_doppler18", "--format", "json", "--out", str(device), "--force"])
+    assert result.exit_code == 2
+    assert result.output.strip() == (f"modelgen: error: {device}: is a device, and modelgen replaces only regular "
+                                     "files (even with --force): move it away or give another --out")
+    assert stat.S_ISCHR(os.lstat(device).st_mode) and sorted(p.name for p in tmp_path.iterdir()) == ["full"]

@@ -59,6 +59,7 @@ class CheckScenario:
     seed: int = 0
     initial_state: np.ndarray | None = None  # zeros when None
     label: str = "synthetic operating point"  # what the scenario is, for reports
+    where: str = ""  # file:line of the model file's check: section it was built from, if any (for messages)
 
     def x0(self) -> np.ndarray:
         n = self.initial_covariance.shape[0]
@@ -256,7 +257,8 @@ def check_generated(
         except ValueError as error:  # the generated Python refused an input of the scenario (its contract)
             if backend.name != "python":  # the compiled backends refuse with a status (ModelError): a bug
                 raise
-            raise ModelError(f"the check scenario ({scenario.label}) is refused by the generated {backend.name}: {error}") from None
+            raise ModelError(f"{_located(scenario)}the check scenario ({scenario.label}) is refused by the generated "
+                             f"{backend.name}: {error}") from None
     ref = reference_run(derived, scenario, options.taylor_order, options.taylor_tolerance, options.process_noise)
     tol = scenario_tolerance(derived, scenario, options.taylor_order)
     initial_variance = np.diag(scenario.initial_covariance)
@@ -271,9 +273,14 @@ def _check_ud_variances(derived: DerivedModel, scenario: CheckScenario, options:
     for measurement, variance in zip(derived.model.measurements, variances):
         if not variance > 0.0:
             raise ModelError(
-                f"measurement {measurement.name!r} has variance {variance:g} at the check scenario ({scenario.label}): "
+                f"{_located(scenario)}measurement {measurement.name!r} has variance {variance:g} at the check scenario ({scenario.label}): "
                 "the UD form's Bierman update needs every variance positive (form 'covariance' takes a variance 0)"
             )
+
+
+def _located(scenario: CheckScenario) -> str:
+    """``file:line: `` of the check: section a scenario was built from, or nothing (a synthetic or the paper's)."""
+    return f"{scenario.where}: " if scenario.where else ""
 
 
 def _build_folder(build_dir: Path | None, backend: str) -> Path | None:

@@ -28,8 +28,9 @@ from typing import Any, Mapping
 import sympy as sp
 
 from modelgen.errors import ModelError
-from modelgen.fileio.datafiles import data_path, read_yaml
-from modelgen.model.declaration import ErrorModel, parse_expression
+from modelgen.fileio.datafiles import data_path, read_yaml, read_yaml_with_lines
+from modelgen.model.declaration import ErrorModel, _check_defined, parse_expression
+from modelgen.model.vectors import MAX_TREE_NODES, tree_size
 
 MATRICES = ("F", "G", "H")
 STATUSES = ("match", "differ", "paper_only", "derived_only")
@@ -181,7 +182,7 @@ def load_paper_table(path: str | Path, model: ErrorModel | None = None) -> Paper
     """
     path = Path(path)
     where = path.name
-    data = read_yaml(path, "paper-table file")
+    data, lines = read_yaml_with_lines(path, "paper-table file")
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:
         raise ModelError(f"{where}: unknown key {unknown[0]!r} (expected one of {sorted(_TOP_KEYS)})")
@@ -211,10 +212,10 @@ def load_paper_table(path: str | Path, model: ErrorModel | None = None) -> Paper
     }
     _check_unit_counts(units, shape, where)
 
-    entries = _entries(data["entries"], "entries", shape, namespace, where)
-    equation_1 = _entries(data.get("equation_1_entries") or [], "equation_1_entries", shape, namespace, where)
+    entries = _entries(data["entries"], "entries", shape, namespace, where, lines)
+    equation_1 = _entries(data.get("equation_1_entries") or [], "equation_1_entries", shape, namespace, where, lines)
     annotations = tuple(
-        _annotation(item, f"{where}: annotations[{i}]", shape)
+        _annotation(item, f"{lines.get(f'annotations[{i}]', where)}: annotations[{i}]", shape)
         for i, item in enumerate(_list(data.get("annotations") or [], f"{where}: annotations"))
     )
     seen: set[tuple[str, Key, str]] = set()
@@ -354,11 +355,12 @@ def _entries(
     shape: Mapping[str, tuple[int, int]],
     namespace: Mapping[str, sp.Symbol],
     where: str,
+    lines: Mapping[str, str] | None = None,
 ) -> tuple[PaperEntry, ...]:
-    """Parse entries, then resolve the references between them."""
+    """Parse entries, then resolve the references between them; ``lines``: ``file:line`` by key path."""
     parsed: dict[Key, tuple[dict, sp.Expr, str]] = {}
     for i, item in enumerate(_list(raw, f"{where}: {kind}")):
-        place = f"{where}: {kind}[{i}]"
+        place = f"{(lines or {}).get(f'{kind}[{i}]', where)}: {kind}[{i}]"
         item = _mapping(item, place, {"matrix", "row", "col", "printed", "expression"}, {"reading", "why"})
         key = _check_index(item["matrix"], item["row"], item["col"], shape, place)
         label = f"{key[0]}({key[1]},{key[2]})"
@@ -392,8 +394,18 @@ def _entries(
             if ref not in parsed:
                 raise ModelError(f"{place}: refers to {ref[0]}({ref[1]},{ref[2]}), which is not in {kind}")
             subs[symbol] = resolve(ref, (*chain, key))
-        resolved[key] = expr.xreplace(subs) if subs else expr
-        return resolved[key]
+        value = expr.xreplace(subs) if subs else expr
+        # References share subexpressions: F(1,k) = F(1,k-1)*F(1,k-1) doubles the
+        # tree with each entry, and the comparison walks the tree (hours at 18).
+        if tree_size(value, MAX_TREE_NODES) > MAX_TREE_NODES:
+            raise ModelError(
+                f"{place}: grows to more than {MAX_TREE_NODES} operations once the entries it refers to are "
+                "written out; write it in a smaller form"
+            )
+        if subs:  # the comparison expands it: bounded, defined and finite as a model's expressions are
+            _check_defined(value, f"{key[0]}({key[1]},{key[2]}) with the entries it refers to written out", place)
+        resolved[key] = value
+        return value
 
     out = []
     for key, (item, _, _) in parsed.items():

@@ -297,6 +297,8 @@ def model_hash(model) -> str:
     declaration.pop("navigation", None)
     declaration.pop("neglected", None)  # what the derivation dropped, carried on the model: not part of the declaration
     declaration.pop("attitude_reset", None)  # derived from the declaration's error definition, like the neglected terms
+    if isinstance(declaration.get("check"), dict):
+        declaration["check"].pop("where", None)  # where the file that declared it lies: not the declaration
     canonical = json.dumps(declaration, sort_keys=True, default=repr, ensure_ascii=True)
     return hashlib.sha256(canonical.encode("utf-8")).hexdigest()[:16]
 

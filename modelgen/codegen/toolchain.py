@@ -28,12 +28,14 @@ from pathlib import Path
 
 import numpy as np
 
-from modelgen.codegen.build import STRICT_FLAGS, compiler
+from modelgen.codegen.build import (
+    STRICT_FLAGS, cached_library, compiler, compiler_identity, library_cache_folder, library_key, store_library,
+)
 from modelgen.codegen.generate import generate_code, render_c_template
 from modelgen.codegen.options import CodegenOptions
 from modelgen.derivation.symbolic import DerivedModel
 from modelgen.errors import ModelError
-from modelgen.fileio.output import write_atomically
+from modelgen.fileio.output import write_atomically, write_bytes_atomically
 
 ARM_EMBEDDED_CC = "arm-none-eabi-gcc"
 ARM_EMBEDDED_SIZE = "arm-none-eabi-size"
@@ -101,12 +103,25 @@ def build_host_driver(folder: Path, model: str, output: Path, flags: tuple[str, 
 
 
 def build_arm_linux_driver(folder: Path, model: str, output: Path) -> Path:
-    """The driver and filter for arm-linux-gnueabihf, statically linked (for qemu-arm)."""
+    """The driver and filter for arm-linux-gnueabihf, statically linked (for qemu-arm), through the compile cache.
+
+    The executable is kept in the compile cache (:mod:`modelgen.codegen.build`)
+    under a digest of the two sources, the headers beside them, the flags and
+    the cross compiler's identity: the same filter flown over another scenario
+    (the scenario is the driver's input, not its code) is not built again.
+    """
     folder = Path(folder)
-    run(
-        [ARM_LINUX_CC, *STRICT_FLAGS, "-O2", "-static", "-I", str(folder), "-o", str(output), str(folder / f"{model}.c"), str(folder / "driver.c"), "-lm"],
-        "arm-linux-gnueabihf build",
-    )
+    sources = [folder / f"{model}.c", folder / "driver.c"]
+    flags = [*STRICT_FLAGS, "-O2", "-static"]
+    # -I is the sources' own folder, whose headers the key holds; its path is not part of what is built
+    key = library_key(sources, [*flags, "-I<sources>", "-lm"], compiler_identity(ARM_LINUX_CC))
+    cache = library_cache_folder()
+    payload = cached_library(cache, key)
+    if payload is not None:
+        write_bytes_atomically(Path(output), payload, mode=0o755)
+        return Path(output)
+    run([ARM_LINUX_CC, *flags, "-I", str(folder), "-o", str(output), *map(str, sources), "-lm"], "arm-linux-gnueabihf build")
+    store_library(cache, key, Path(output).read_bytes())
     return Path(output)
 
 
@@ -266,6 +281,110 @@ def forbidden_symbols_in_map(map_file: Path) -> list[str]:
 
 
 # -- static analysis -------------------------------------------------------------------
-def run_cppcheck(files: list[Path], include: Path) -> subprocess.CompletedProcess:
-    """cppcheck with CPPCHECK_ARGS; raises ModelError with its findings on failure."""
-    return run([CPPCHECK, *CPPCHECK_ARGS, "-I", str(include), *map(str, files)], "cppcheck")
+def run_cppcheck(files: list[Path], include: Path, workers: int = 1) -> list[subprocess.CompletedProcess]:
+    """cppcheck with CPPCHECK_ARGS over every preprocessor configuration it would check; raises ModelError on a finding.
+
+    cppcheck checks each file once per configuration (each set of the
+    symbols its ``#if`` lines test, ``""`` first), and some configurations
+    preprocess to the same text (for the generated C: the lane-pair macro of
+    a build without SSE2, every ``__SSE2_MATH__`` variant of a float filter).
+    Each file's configurations are the ones cppcheck itself enumerates
+    (:func:`cppcheck_configurations`); each distinct preprocessed text of a
+    file is checked once, by cppcheck told that configuration
+    (:func:`cppcheck_configuration_flags`), with ``workers`` checks at a time.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    checks = []
+    for file in map(Path, files):
+        texts: dict[bytes, str] = {}
+        for configuration in cppcheck_configurations(file, include):
+            texts.setdefault(cppcheck_preprocessed(file, include, configuration), configuration)
+        checks += [(file, configuration) for configuration in texts.values()]
+
+    def check(item: tuple[Path, str]) -> subprocess.CompletedProcess:
+        file, configuration = item
+        return run([CPPCHECK, *CPPCHECK_ARGS, *cppcheck_configuration_flags(configuration), "-I", str(include), str(file)],
+                   f"cppcheck ({configuration or 'no symbol defined'})")
+
+    with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
+        return list(pool.map(check, checks))
+
+
+#: The lines a configuration depends on: preprocessor directives (a line continued with a backslash goes on).
+_DIRECTIVE = re.compile(r"\s*#\s*(if|ifdef|ifndef|elif|else|endif|define|undef|include|error)\b")
+
+
+def cppcheck_configurations(file: Path, include: Path) -> list[str]:
+    """The configurations cppcheck checks ``file`` in (``""``: nothing defined), as it lists them itself.
+
+    cppcheck enumerates them from the preprocessor directives of the file and
+    of what it includes, before it checks anything; it is asked here about a
+    copy of the files with every other line blank (the same directives on
+    the same lines), which takes it a tenth of a second instead of seconds
+    per configuration.
+    """
+    import tempfile
+
+    file, include = Path(file).resolve(), Path(include).resolve()
+    with tempfile.TemporaryDirectory(prefix="modelgen-cppcheck-") as name:
+        root = Path(name)
+        mirrors = {folder: root / f"d{i}" for i, folder in enumerate(dict.fromkeys([file.parent, include]))}
+        for folder, mirror in mirrors.items():
+            for source in [*folder.rglob("*.h"), *([file] if folder == file.parent else [])]:
+                target = mirror / source.relative_to(folder)
+                target.parent.mkdir(parents=True, exist_ok=True)
+                target.write_text(_directives_only(source.read_text(encoding="utf-8", errors="replace")), encoding="utf-8")
+        listed = run([CPPCHECK, "--std=c99", "-I", str(mirrors[include]), str(mirrors[file.parent] / file.name)],
+                     "cppcheck (its configurations)").stdout.decode(errors="replace")
+    prefix = f"Checking {mirrors[file.parent] / file.name}: "
+    return ["", *(line[len(prefix):].removesuffix("...") for line in listed.splitlines() if line.startswith(prefix))]
+
+
+def _directives_only(text: str) -> str:
+    """``text`` with its comments and every line that is not a preprocessor directive blanked, lines kept in place."""
+    lines, continued, in_comment = [], False, False
+    for line in text.splitlines():
+        code, i, quote = [], 0, None
+        while i < len(line):
+            if in_comment:
+                end = line.find("*/", i)
+                if end < 0:
+                    break
+                in_comment, i = False, end + 2
+                code.append(" ")
+            elif quote:
+                code.append(line[i : i + 2] if line[i] == "\\" else line[i])
+                quote = None if line[i] == quote else quote
+                i += 2 if line[i] == "\\" else 1
+            elif line.startswith("/*", i):
+                in_comment, i = True, i + 2
+            elif line.startswith("//", i):
+                break
+            else:
+                quote = line[i] if line[i] in "\"'" else None
+                code.append(line[i])
+                i += 1
+        stripped = "".join(code)
+        kept = continued or bool(_DIRECTIVE.match(stripped))
+        lines.append(stripped if kept else "")
+        continued = kept and line.endswith("\\")
+    return "\n".join(lines) + "\n"
+
+
+def cppcheck_configuration_flags(configuration: str) -> list[str]:
+    """cppcheck's options that check one configuration only, as it checks it among all of them.
+
+    ``""`` is the first configuration cppcheck checks (``--max-configs=1``);
+    another is its symbols given with ``-D``, each with the empty value a
+    configuration gives it unless it names one (``A;B=0`` is ``-DA= -DB=0``).
+    """
+    if not configuration:
+        return ["--max-configs=1", "--suppress=toomanyconfigs"]
+    return [f"-D{symbol}" if "=" in symbol else f"-D{symbol}=" for symbol in configuration.split(";")]
+
+
+def cppcheck_preprocessed(file: Path, include: Path, configuration: str) -> bytes:
+    """``file`` as cppcheck preprocesses it in ``configuration`` (``cppcheck -E``)."""
+    return run([CPPCHECK, "-E", "--std=c99", *cppcheck_configuration_flags(configuration), "-I", str(include), str(file)],
+               "cppcheck -E").stdout

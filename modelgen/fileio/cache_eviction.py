@@ -12,8 +12,9 @@ when unset, no cap for ``0``.  An entry's modification time is its last use:
 a cache that takes an entry marks it (:func:`mark_used`).
 
 Only entries are ever removed: a regular file of one of the three folders
-whose name is an entry name (a 64-digit hexadecimal key, an optional
-``.k`` for the further names a key may use, then the kind's suffix) and
+whose name is an entry name (a 64-digit hexadecimal key, ``navigator-`` first
+for a compiled navigator's, an optional ``.k`` for the further names a key
+may use, then the kind's suffix) and
 whose first bytes are the kind's magic line (:data:`KINDS`; any layout
 version of it, so that entries an older modelgen left behind are counted
 and removed too).  Any other file, a folder, a link, a temporary file being
@@ -55,7 +56,9 @@ KINDS = (
     EntryKind("trajectories", ".trajectory", b"modelgen-trajectory-cache "),
 )
 
-_ENTRY_NAME = re.compile(r"[0-9a-f]{64}(\.[0-9]+)?")
+#: An entry's name without its suffix: a key (64 hexadecimal digits; a compiled navigator's key
+#: says what it is, ``navigator-`` first) and the further names a key may use (``.k``).
+_ENTRY_NAME = re.compile(r"(navigator-)?[0-9a-f]{64}(\.[0-9]+)?")
 
 
 @dataclass(frozen=True)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -83,7 +84,9 @@ def read_yaml_with_lines(path: str | Path, what: str = "data file") -> tuple[dic
     except RecursionError:
         raise ModelError(f"{path}: nested too deeply to read") from None
     except ValueError as exc:  # an integer of over 4300 digits (Python's limit on int(str))
-        raise ModelError(f"{path}: a number too long to read ({exc})") from None
+        digits = re.search(r"[0-9]{4301,}", text)  # the loader's error has no mark: the line of the first such run
+        where = f"{path}:{text.count(chr(10), 0, digits.start()) + 1}" if digits else str(path)
+        raise ModelError(f"{where}: a number too long to read ({exc})") from None
     if not isinstance(data, dict):
         raise ModelError(f"{path}: expected a mapping at the top level")
     return data, lines

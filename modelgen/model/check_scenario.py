@@ -29,7 +29,7 @@ states and parameters need.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -52,6 +52,8 @@ class CheckSpec:
     initial_sigma: tuple[tuple[str, float], ...] = ()
     initial_covariance: tuple[tuple[float, ...], ...] | None = None
     seed: int = 0
+    #: Where the section is (``file:line``), for the messages about the scenario; no part of the declaration.
+    where: str = field(default="", compare=False)
 
     def parameter_values(self) -> dict[str, float]:
         return dict(self.parameters)
@@ -259,4 +261,5 @@ def build_check_spec(
         initial_sigma=tuple((s, sigma[s]) for s in model.state_names) if cov is None else (),
         initial_covariance=cov,
         seed=int(section.get("seed", 0)),
+        where=place,
     )

@@ -218,7 +218,7 @@ def check_navigation_model(config: NavigatorConfig, model_file: Path) -> None:
     A model with a ``navigation:`` section is the navigator's to generate; a model without one flies only with
     the error states of the built-in navigator model, in its order (the hand-written error-state layout).
     """
-    from modelgen.fileio.datafiles import read_yaml
+    from modelgen.fileio.datafiles import read_yaml, read_yaml_with_lines
     from modelgen.model.loading import load_model
 
     data = read_yaml(model_file, "model file")
@@ -236,7 +236,8 @@ def check_navigation_model(config: NavigatorConfig, model_file: Path) -> None:
     need = ("a model with a navigation: section" if wanted is None else
             f"a model with a navigation: section, or the {len(wanted)} error states of {BUILTIN_NAVIGATOR_MODEL} "
             "in their order")
-    raise ModelError(f"{config.path}: model {config.model!r} ({model_file}) is not a navigation model the replay "
+    _, lines = read_yaml_with_lines(config.path, "navigator configuration file")  # where the model is named
+    raise ModelError(f"{lines.get('model', config.path)}: model {config.model!r} ({model_file}) is not a navigation model the replay "
                      f"can fly: it needs {need}; this one has {len(states)} states ({', '.join(states[:4])}"
                      f"{', ...' if len(states) > 4 else ''}) and no navigation: section")
 

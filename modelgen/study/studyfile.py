@@ -55,6 +55,7 @@ from modelgen.table2.systems import PURE_INERTIAL
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path, read_yaml_with_lines
 from modelgen.model.declaration import ErrorModel
+from modelgen.model.file_fields import is_number
 from modelgen.model.loading import load_model
 from modelgen.model.units import to_si
 from modelgen.simulation.profile_keys import check_flight_size
@@ -190,6 +191,8 @@ class _Reader:
         return value
 
     def number(self, value: Any, key_path: str) -> float:
+        if isinstance(value, str) and is_number(value):  # YAML 1.1 reads 1e9 (no dot) as text: a number, as in profiles
+            value = float(value)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ModelError(f"{self.at(key_path)}: {value!r} is not a number")
         if not math.isfinite(value):

@@ -38,12 +38,17 @@ def write_files(folder: Path, files: dict[str, str]) -> Path:
 
 
 def build(derived: DerivedModel, folder: Path, options: CodegenOptions | None = None) -> Built:
-    """Generate ``derived`` with ``options`` into ``folder``, compile its C strictly, import its Python."""
+    """Generate ``derived`` with ``options`` into ``folder``, compile its C strictly, import its Python.
+
+    The library comes through the suite's compile cache (tests/conftest.py: private to the run, shared by its
+    workers): the same generated C at -O1 is compiled once in a run, wherever another test compiled it first
+    (tests/codegen/test_options.py compiles every option combination of the paper's model).
+    """
     options = options or CodegenOptions()
     code = generate_code(derived, options)
     write_files(folder, code.files)
     name = derived.model.name
-    library = compile_shared_library([folder / f"{name}.c"], folder / f"lib{name}.so", ("-O1",))
+    library = compile_shared_library([folder / f"{name}.c"], folder / f"lib{name}.so", ("-O1",), cache=True)
     return Built(derived, code, folder, load_python_module(folder / f"{name}.py"), library)
 
 

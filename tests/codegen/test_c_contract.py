@@ -161,7 +161,7 @@ def test_masked_update_equals_the_update_with_the_used_rows_and_reports_innovati
     files = generate_code(paper_derived, options).files
     folder = write_files(tmp_path, files)
     exec(compile(files["ned_doppler18.py"], "ned_doppler18.py", "exec"), python)
-    library = compile_shared_library([folder / "ned_doppler18.c"], folder / "libned_doppler18.so")
+    library = compile_shared_library([folder / "ned_doppler18.c"], folder / "libned_doppler18.so", cache=True)
     model = paper_derived.model
     c = CompiledFilter(library, model.name, ModelSizes.of(paper_derived), model.parameter_names, options=options)
     values = {q.name: 0.6 if q.name == "latitude" else 20.0 for q in model.parameters if q.value is None}
@@ -200,7 +200,7 @@ def test_masked_update_equals_the_update_with_the_used_rows_and_reports_innovati
 def test_masked_update_refuses_a_nan_in_a_used_row_and_leaves_filter_and_outputs_unchanged(options, paper_derived, tmp_path):
     files = generate_code(paper_derived, options).files
     folder = write_files(tmp_path, files)
-    library = compile_shared_library([folder / "ned_doppler18.c"], folder / "libned_doppler18.so")
+    library = compile_shared_library([folder / "ned_doppler18.c"], folder / "libned_doppler18.so", cache=True)
     model = paper_derived.model
     c = CompiledFilter(library, model.name, ModelSizes.of(paper_derived), model.parameter_names, options=options)
     assert c.set_parameters({q.name: 0.6 if q.name == "latitude" else 20.0 for q in model.parameters if q.value is None}) == 0

@@ -38,13 +38,13 @@ def reference(paper_derived, scenario):
 
 @pytest.fixture(scope="module")
 def libraries(paper_derived, tmp_path_factory):
-    """slug -> compiled shared library of that combination."""
+    """slug -> compiled shared library of that combination (through the run's compile cache: tests/codegen/generated_support.build)."""
     root = tmp_path_factory.mktemp("options")
     name = paper_derived.model.name
 
     def build(options):
         folder = write_atomically(root / options.slug(), generate_code(paper_derived, options).files)
-        return options.slug(), compile_shared_library([folder / f"{name}.c"], folder / f"lib{name}.so", ("-O1",))
+        return options.slug(), compile_shared_library([folder / f"{name}.c"], folder / f"lib{name}.so", ("-O1",), cache=True)
 
     with ThreadPoolExecutor(max_workers=cores_per_worker()) as pool:
         return dict(pool.map(build, COMBINATIONS))

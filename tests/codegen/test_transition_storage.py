@@ -29,7 +29,7 @@ VALUES = {"latitude": 0.6}
 def compiled(request, paper_derived, tmp_path_factory) -> CompiledFilter:
     options = request.param
     folder = write_files(tmp_path_factory.mktemp(options.slug()), generate_code(paper_derived, options).files)
-    library = compile_shared_library([folder / "ned_doppler18.c"], folder / "libned_doppler18.so")
+    library = compile_shared_library([folder / "ned_doppler18.c"], folder / "libned_doppler18.so", cache=True)
     model = paper_derived.model
     c = CompiledFilter(library, model.name, ModelSizes.of(paper_derived), model.parameter_names, options=options)
     values = {q.name: VALUES.get(q.name, 20.0) for q in model.parameters if q.value is None}

@@ -30,6 +30,7 @@ from modelgen.derivation.discretization import van_loan_discretization
 from modelgen.derivation.symbolic import derive, parameter_vector
 from modelgen.errors import ModelError
 from modelgen.jobs import paper_parameters, paper_scenario
+from tests.parallel_support import cores_per_worker
 from modelgen.model.loading import load_model_text
 from tests.codegen.large_model_support import large_model
 from tests.codegen.test_degenerate_models import MODELS as DEGENERATE
@@ -313,4 +314,4 @@ def test_van_loan_c_passes_cppcheck(paper_derived, tmp_path):
         CodegenOptions(process_noise="van-loan", scalar="float", storage="packed", taylor_tolerance=None, recompute_threshold=1e-6),
     ):
         folder = write_atomically(tmp_path / options.slug(), generate_code(paper_derived, options).files)
-        toolchain.run_cppcheck([folder / "ned_doppler18.c", folder / "ned_doppler18.h"], folder)
+        toolchain.run_cppcheck([folder / "ned_doppler18.c", folder / "ned_doppler18.h"], folder, workers=cores_per_worker())

@@ -111,6 +111,20 @@ def test_a_library_taken_from_the_cache_is_marked_used_and_outlives_a_newer_unus
     assert build.cached_library(folder, key("2")) is None  # removed: a miss, compiled again by the caller
 
 
+def test_a_compiled_navigators_entry_counts_toward_the_cap_and_goes_when_least_recently_used(tmp_path, monkeypatch):
+    """The replay's navigators are compile-cache entries named navigator-<key> (issue 28: they sat outside the cap)."""
+    from modelgen.codegen import build
+
+    monkeypatch.setenv(CAP_ENV, "1")  # 1 MB: room for two 400 kB entries, not three
+    folder = tmp_path / "libraries"
+    navigator = build.store_library(folder, "navigator-" + key("1"), b"n" * 400_000)
+    os.utime(navigator, (1_000, 1_000))
+    library = build.store_library(folder, key("2"), b"2" * 400_000)
+    assert [e.path for e in cached_entries(tmp_path)] == [navigator, library]
+    build.store_library(folder, key("3"), b"3" * 400_000)
+    assert not navigator.exists() and library.exists()
+
+
 def test_a_new_trajectory_entry_removes_the_least_recently_used_one_to_fit(tmp_path, monkeypatch):
     from modelgen.codegen.build import CACHE_ENV
     from modelgen.simulation.scenario import load_profile

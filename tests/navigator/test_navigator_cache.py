@@ -30,6 +30,7 @@ def test_replay_with_a_relative_cache_dir_is_one_error_line_and_writes_nothing(t
 def test_a_corrupt_cached_navigator_is_not_loaded_but_compiled_again(tmp_path, monkeypatch):
     """An entry whose library bytes were damaged after it was written fails its digest: compiled again, not loaded."""
     from modelgen.codegen.build import CACHE_ENV
+    from modelgen.fileio.cache_eviction import cached_entries
     from modelgen.navigator.cnav import cache_folder, cached_c_navigator, navigator_key
     from modelgen.navigator.errorstate import model_path
     from modelgen.navigator.spec import navigator_spec
@@ -39,8 +40,11 @@ def test_a_corrupt_cached_navigator_is_not_loaded_but_compiled_again(tmp_path, m
     spec = navigator_spec(model, with_python=False)
     _, hit = cached_c_navigator(spec)
     assert not hit
+    # the compile cache's own folder under $MODELGEN_CACHE_DIR, an entry its size cap counts (issue 28: it had its own)
+    assert cache_folder() == tmp_path / "cache" / "libraries"
     entries = sorted(cache_folder().glob(navigator_key(model, 1024) + "*.lib"))
     assert len(entries) == 1
+    assert [entry.path for entry in cached_entries(tmp_path / "cache")] == entries
     data = bytearray(entries[0].read_bytes())
     data[-100] ^= 0xFF  # one byte of the library itself
     entries[0].write_bytes(bytes(data))

@@ -231,6 +231,15 @@ def test_monte_carlo_hours_and_imu_rate_are_bounded_with_file_and_line(tmp_path)
     assert "IMU samples" in refused(tmp_path, mc + "  hours: 200\n  imu_rate_hz: 5000\n")
 
 
+def test_number_text_is_read_as_in_profiles_and_lax_forms_are_refused(tmp_path):
+    """YAML 1.1 reads 1e9 and 1e-2 (no dot) as text: a study read "'1e9' is not a number" where a profile reads it."""
+    study = load_study(write(tmp_path, GRID.replace("values: [0.01, 0.1]", "values: [1e-2, '0.1']")))
+    assert study.parameters[0].values == pytest.approx((0.01, 0.1))
+    for lax in ("'1_0'", "' 1.5'", "true", "'0x10'"):
+        message = refused(tmp_path, GRID.replace("values: [0.01, 0.1]", f"values: [0.01, {lax}]"))
+        assert "study.yaml:5" in message and "is not a number" in message, (lax, message)
+
+
 def test_a_folder_named_like_a_built_in_study_does_not_shadow_it(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "paper_gyro_doppler_1000").mkdir()
