@@ -9,8 +9,8 @@ its approximations and dropped terms), then F, G, H, Q, R
 (``modelgen.derivation.symbolic.derive``).
 
 * local_level: ``ins_gnss21_nav`` (NED, phi-angle, NED metres; built in);
-* ecef: ``tests/model/ins_gnss21_ecef.yaml`` (e-frame r, v, C_b^e, phi-angle, J2 gravity);
-* wander_azimuth: ``tests/model/ins_gnss21_wander.yaml`` (free wander azimuth, psi-angle, computed-frame
+* ecef: ``modelgen/data/mechanizations/ins_gnss21_ecef.yaml`` (e-frame r, v, C_b^e, phi-angle, J2 gravity);
+* wander_azimuth: ``modelgen/data/mechanizations/ins_gnss21_wander.yaml`` (free wander azimuth, psi-angle, computed-frame
   velocity, metres; the same 5 s target).
 
 Writes bench/results/mechanizations.json and .md.
@@ -37,8 +37,8 @@ from modelgen.model.loading import load_model  # noqa: E402
 TARGET_S = 5.0
 MODELS = {
     "local_level": "ins_gnss21_nav",
-    "ecef": str(REPO / "tests" / "model" / "ins_gnss21_ecef.yaml"),
-    "wander_azimuth": str(REPO / "tests" / "model" / "ins_gnss21_wander.yaml"),
+    "ecef": str(REPO / "modelgen" / "data" / "mechanizations" / "ins_gnss21_ecef.yaml"),
+    "wander_azimuth": str(REPO / "modelgen" / "data" / "mechanizations" / "ins_gnss21_wander.yaml"),
 }
 TARGETED = ("ecef", "wander_azimuth")
 

@@ -266,7 +266,8 @@ def run(out_root: str, report_dir: str, no_figures: bool, with_simulation: bool,
     compiles the C strictly and checks both against the numpy reference,
     cross-checks every hand-written model against its twin derived from the
     navigation equations and the paper's eqs. (1)-(6) from first principles
-    (crosscheck.md, paper_equations.md), runs the paper's covariance
+    (crosscheck.md, paper_equations.md), cross-checks the ECEF and
+    wander-azimuth mechanizations against local level (mechanizations.md), runs the paper's covariance
     analysis (Table 2, Figs 2-7), flies the paper's
     profile and the recorded car drive, and writes REPORT/README.md with
     links to everything.
@@ -283,10 +284,12 @@ def run(out_root: str, report_dir: str, no_figures: bool, with_simulation: bool,
     report = Path(report_dir)
     click.echo(job.text)
     twins_unexplained = job.twins.unexplained if job.twins is not None else 0
-    if job.failed_models or job.verification.unexplained or twins_unexplained:
+    mechanizations_failed = job.mechanizations.failed if job.mechanizations is not None else []
+    if job.failed_models or job.verification.unexplained or twins_unexplained or mechanizations_failed:
         reason = ", ".join(job.failed_models) or (
             "unexplained paper differences" if job.verification.unexplained
             else f"{twins_unexplained} unexplained differences between hand-written models and their twins (crosscheck.md)"
+            if twins_unexplained else f"mechanization cross-checks failed: {', '.join(mechanizations_failed)} (mechanizations.md)"
         )
         click.echo(f"modelgen run: FAILED ({reason})", err=True)
         sys.exit(EXIT_CHECK_FAILED)

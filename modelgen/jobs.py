@@ -38,6 +38,7 @@ if TYPE_CHECKING:
     from modelgen.checks.code_check import CheckScenario, ConformanceResult
     from modelgen.checks.paper_check import VerificationResult
     from modelgen.checks.paper_equations import PaperEquationsResult
+    from modelgen.checks.mechanizations import MechanizationChecks
     from modelgen.checks.twins import TwinChecks
     from modelgen.codegen.generate import GeneratedCode
 
@@ -464,6 +465,7 @@ class MainJobResult:
     runs: list[ModelRun]
     verification: VerificationResult
     twins: TwinChecks | None = None  # the cross-check of every hand model and its twin, and the paper from first principles
+    mechanizations: MechanizationChecks | None = None  # ECEF and wander azimuth against local level, the polar flight
 
     @property
     def failed_models(self) -> list[str]:
@@ -493,6 +495,7 @@ def main_job(
     from modelgen.table2.systems import PaperModels
     from modelgen.checks.paper_check import verify, write_verification_report
     from modelgen.checks.paper_table import CORE_PAPER_TABLE, paper_table_model
+    from modelgen.checks.mechanizations import run_mechanization_checks, write_mechanizations_report
     from modelgen.checks.twins import report_section, run_twin_checks, write_twin_reports
 
     paper_model = paper_table_model(data_path(CORE_PAPER_TABLE))
@@ -506,6 +509,9 @@ def main_job(
     progress("cross-check the hand-written models against their twins; the paper from first principles ...")
     twins = run_twin_checks(models.get, paper_model=paper_model)
     write_twin_reports(twins, report)
+    progress("cross-check the mechanizations: ECEF and wander azimuth against local level, a polar flight ...")
+    mechanizations = run_mechanization_checks()
+    write_mechanizations_report(mechanizations, report)
     progress("covariance analysis (Table 2, Figs 2-7) ...")
     analysis = run_covariance_analysis(report / "covariance", PaperModels.build(derived), figures=figures, progress=echo)
     twin_text = report_section(twins).split("\n", 2)[2]
@@ -513,6 +519,7 @@ def main_job(
                                     twin_text, ({"quantity": "unexplained differences between hand-written models and their twins",
                                                  "reached": str(twins.unexplained), "target": "0",
                                                  "met": twins.unexplained == 0},))]
+    sections.append(mechanizations_section(mechanizations))
     sections.append(ReportSection(
         "Covariance analysis (Table 2 analogue)",
         analysis.table + "\n\nDetails: [covariance/table2.md](covariance/table2.md)",
@@ -536,7 +543,17 @@ def main_job(
                     "reached": str(len(result.unexplained)), "target": "0", "met": not result.unexplained}
     text = run_report(summary, runs, Path(out_root), sections, paper_targets=(paper_target,))
     write_text_atomically(report / "README.md", text)
-    return MainJobResult(text, runs, result, twins)
+    return MainJobResult(text, runs, result, twins, mechanizations)
+
+
+def mechanizations_section(checks: MechanizationChecks) -> ReportSection:
+    """The run report's section on :mod:`modelgen.checks.mechanizations`: its table, and its one target (no check failed)."""
+    from modelgen.checks.mechanizations import report_section_text
+
+    failed = checks.failed
+    return ReportSection("Mechanizations cross-checked (ECEF and wander azimuth against local level)", report_section_text(checks),
+                         ({"quantity": "mechanization cross-checks outside their bound (incl. the polar flight)",
+                           "reached": str(len(failed)), "target": "0", "met": not failed},))
 
 
 def replay_section(folder: Path, echo=print) -> ReportSection:

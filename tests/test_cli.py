@@ -1,5 +1,7 @@
 """The command line: help for every command, clear errors, nothing half-written."""
 
+import json
+
 import pytest
 from click.testing import CliRunner
 
@@ -82,6 +84,10 @@ def test_run_does_the_main_job_end_to_end(runner, tmp_path, monkeypatch):
     assert "## Hand-written models against their twins" in report and "Unexplained: **0**" in report
     assert "## The paper from first principles" in report and "F(4,5) (dV_n, dV_e), eq. (1): physics" in report
     assert (tmp_path / "report" / "crosscheck.json").is_file() and (tmp_path / "report" / "paper_equations.json").is_file()
+    # the mechanizations' cross-checks (modelgen.checks.mechanizations): their section says every check passed
+    assert "## Mechanizations cross-checked" in report and "Every check passed: **yes**" in report
+    assert "| Mechanizations cross-checked | mechanization cross-checks outside their bound (incl. the polar flight) | 0 | 0 | met |" in report
+    assert json.loads((tmp_path / "report" / "mechanizations.json").read_text())["passed"]
 
 
 @pytest.mark.flight

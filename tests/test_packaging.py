@@ -56,6 +56,7 @@ def test_wheel_contains_templates_models_data_and_py_typed(wheel):
         assert f"modelgen/data/{data.name}" in names
     shipped = [p for p in (REPO / "modelgen" / "data" / "drives").rglob("*") if p.is_file()]
     shipped += list((REPO / "modelgen" / "navigator" / "models").glob("*.yaml"))
+    shipped += list((REPO / "modelgen" / "data" / "mechanizations").glob("*.yaml"))  # modelgen run cross-checks these
     assert len(shipped) >= 5, "the recorded drive (logs, README, LICENSE) and the navigator's model"
     for path in shipped:  # modelgen replay with no arguments flies these after a plain pip install
         assert path.relative_to(REPO).as_posix() in names

@@ -1,6 +1,6 @@
 """The wander_azimuth mechanization (issue 27 item 1) against local level and against its own navigation equations.
 
-``tests/model/ins_gnss21_wander.yaml`` is the 21-state INS/GNSS filter in a free
+``modelgen/data/mechanizations/ins_gnss21_wander.yaml`` is the 21-state INS/GNSS filter in a free
 wander-azimuth frame (psi-angle, computed-frame velocity, metres).  Three checks:
 
 * At wander angle alpha = 0 the wander frame is the NED frame, but it turns
@@ -31,24 +31,24 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from modelgen.checks import mechanizations as mech
+from modelgen.checks.mechanizations import (
+    LOCAL_LEVEL_TWIN,
+    LOCAL_LEVEL_TWIN_NAME,
+    POINT_IDS,
+    POINTS,
+    WANDER_MODEL,
+    euler as _euler,
+    geodetic as _geodetic,
+    known_parameters as _known_parameters,
+    normal_gravity as _normal_gravity,
+    point_values as _point_values,
+    skew as _skew,
+)
 from modelgen.derivation.symbolic import derive
 from modelgen.model import wgs84
 from modelgen.model.loading import load_model, load_model_text
-from tests.model.test_ecef_mechanization import (
-    LOCAL_LEVEL_TWIN,
-    POINTS,
-    _antenna_velocity,
-    _euler,
-    _frame_angle,
-    _geodetic,
-    _known_parameters,
-    _normal_gravity,
-    _point_values,
-    _skew,
-)
 
-HERE = Path(__file__).resolve().parent
-WANDER_MODEL = HERE / "ins_gnss21_wander.yaml"
 W = wgs84.GPS_EARTH_RATE
 
 
@@ -59,7 +59,7 @@ def wander():
 
 @pytest.fixture(scope="module")
 def local_level():
-    return derive(load_model_text(LOCAL_LEVEL_TWIN, filename="ins_gnss21_ecef_local_level.yaml"))
+    return derive(load_model_text(LOCAL_LEVEL_TWIN, filename=LOCAL_LEVEL_TWIN_NAME))
 
 
 # -- the wander-azimuth navigation equations, typed here (numpy) -----------------------------------------------
@@ -252,29 +252,13 @@ def _sensor_values():
 
 
 # -- alpha = 0: local level ---------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("point", POINTS[:4], ids=["45N_10E_300m", "34S_151E_11km", "78N_60W_50m", "equator_2km"])
+@pytest.mark.parametrize("point", POINTS[:4], ids=POINT_IDS[:4])
 def test_wander_at_zero_wander_angle_equals_local_level_but_for_the_vertical_transport_rate(wander, local_level, point):
-    local, _, _, transport, _ = _point_values(point)
-    L = local["latitude"]
-    values = {**local, "wander_dcm_13": math.cos(L), "wander_dcm_23": 0.0, "wander_dcm_33": -math.sin(L),
-              **{f"velocity_{a}": local[f"velocity_{w}"] for a, w in zip("xyz", ("north", "east", "down"))}}
-    n = wander.numeric(_known_parameters(wander, values))
-    m = local_level.numeric(_known_parameters(local_level, local))
-    T_dot = np.zeros((21, 21))
-    for block in range(3):  # alpha' = -lambda' sin L = rho_z (NED)
-        T_dot[3 * block:3 * block + 3, 3 * block:3 * block + 3] = transport[2] * _skew([0.0, 0.0, 1.0])
-    assert np.abs(n["F"] - (m["F"] + T_dot)).max() <= 1e-13 * np.abs(n["F"]).max()
-    assert abs(transport[2]) * 1e-13 < np.abs(n["F"] - m["F"]).max() or abs(transport[2]) < 1e-9  # the difference is alpha'
-    assert np.array_equal(n["G"], m["G"]) and np.array_equal(n["Q"], m["Q"]) and np.array_equal(n["R"], m["R"])
-    H_local = m["H"].copy()  # the twin's velocity difference in each NED frame (no dtheta x v_antenna term)
-    H_local[3:6, 0:3] -= _skew(_antenna_velocity(local)) @ _frame_angle(local)
-    assert np.abs(n["H"][3:6] - H_local[3:6]).max() <= 1e-13 * np.abs(n["H"]).max()
-    lever = float(np.linalg.norm(LEVER))  # the twin's lever-arm position drops O(l/R) terms
-    assert np.abs(n["H"][:3] - H_local[:3]).max() <= 2 * lever * (1 + abs(math.tan(L))) / 6.35e6
-    no_arm = {f"lever_arm_{a}": 0.0 for a in "xyz"}
-    n0 = wander.numeric(_known_parameters(wander, {**values, **no_arm}))
-    m0 = local_level.numeric(_known_parameters(local_level, {**local, **no_arm}))
-    assert np.abs(n0["H"][:3] - m0["H"][:3]).max() <= 1e-13  # without a lever arm the positions agree to rounding
+    comparisons = mech.wander_against_local_level(wander, local_level, point)
+    assert not [(c.matrix, c.difference, c.bound) for c in comparisons if not c.passed]
+    matrices = {c.matrix for c in comparisons}
+    assert {"F (F_n + dT/dt)", "G", "Q", "R", "H velocity rows", "H position rows", "H position rows, no lever arm"} <= matrices
+    assert "F - F_n (shows alpha' = rho_z)" in matrices  # every point here has a vertical transport rate (>= 1e-9)
 
 
 # -- alpha != 0: the navigation equations by finite differences ----------------------------------------------------
@@ -305,22 +289,17 @@ def test_wander_F_G_H_equal_finite_differences_of_the_wander_navigation_equation
 
 
 # -- the poles ---------------------------------------------------------------------------------------------------------
-def _replace_value(text: str, name: str, value: float) -> str:
-    return re.sub(rf"{name}: [-0-9.e+]+", f"{name}: {float(value)!r}", text, count=1)
-
-
-def test_a_polar_flight_loads_in_wander_azimuth_with_finite_matrices():
+def test_a_polar_flight_loads_in_wander_azimuth_with_finite_matrices_and_local_level_refuses_it():
     state = _wander_state(WANDER_POINTS[-1])
-    text = WANDER_MODEL.read_text()
-    for name, value in _wander_values(state, {}).items():
-        text = _replace_value(text, name, value)
-    polar = load_model_text(text, filename="polar_wander.yaml")
+    C_bw, v, C_ew, h = mech.polar_state()
+    assert all(np.allclose(a, b, rtol=0, atol=1e-15) for a, b in zip((C_bw, v, C_ew), state[:3]))  # the point flown here
+    polar = load_model_text(mech.polar_wander_text(C_ew, C_bw, v, h), filename="polar_wander.yaml")
     values = {**dict(polar.parameter_defaults()), **polar.check.parameter_values()}
     assert abs(values["wander_dcm_33"] + math.sin(math.radians(89.9))) < 1e-15
-    numeric = derive(polar).numeric(values)
-    assert all(np.isfinite(numeric[k]).all() for k in ("F", "G", "H"))
-    # ... where local level refuses it naming both ways out: tests/model/test_ecef_mechanization.py and the corpus
-    # case navigation_local_level_polar_scenario_refused
+    check = mech.polar_check()  # derives the polar file itself
+    assert check.passed and check.wander_finite and check.local_level_refused
+    assert "latitude 89.9 deg is within 1 deg of a pole" in check.local_level_message
+    assert "'mechanization: wander_azimuth' or 'mechanization: ecef'" in check.local_level_message
 
 
 def test_the_wander_curvature_determinant_is_one_over_the_product_of_the_radii():
