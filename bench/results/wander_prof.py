@@ -1,4 +1,4 @@
-"""Where load + derive of tests/model/ins_gnss21_wander.yaml spends its time (issue 27 item 1).
+"""Where load + derive of modelgen/data/mechanizations/ins_gnss21_wander.yaml spends its time (issue 27 item 1).
 
 Run: PYTHONPATH=. python bench/results/wander_prof.py [--profile]
 Prints the CPU seconds (time.process_time) of the derivation's stages, then with --profile the
@@ -19,7 +19,7 @@ import modelgen.model.perturbation.linearization as linearization
 from modelgen.derivation.symbolic import derive
 from modelgen.model.loading import load_model
 
-MODEL = "tests/model/ins_gnss21_wander.yaml"
+MODEL = "modelgen/data/mechanizations/ins_gnss21_wander.yaml"
 SECONDS: dict[str, float] = {}
 
 
