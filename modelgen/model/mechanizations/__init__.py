@@ -31,7 +31,7 @@ from typing import Callable, Protocol
 import sympy as sp
 
 from modelgen.errors import ModelError
-from modelgen.model.mechanizations import ecef, wander_azimuth
+from modelgen.model.mechanizations import ecef, local_level, wander_azimuth
 from modelgen.model.mechanizations.ecef import Ecef
 from modelgen.model.mechanizations.local_level import LocalLevel
 from modelgen.model.mechanizations.wander_azimuth import WanderAzimuth
@@ -76,6 +76,9 @@ class Mechanization(Protocol):
 #: Mechanizations by the name a model file gives in ``navigation.mechanization``: each makes its
 #: mechanization from (frame, Earth-rate symbol, written velocity equation, written position equation).
 MECHANIZATIONS: dict[str, Callable[..., Mechanization]] = {"local_level": LocalLevel, "ecef": Ecef, "wander_azimuth": WanderAzimuth}
+#: every registered mechanization's Earth functions (R_M(L), g(L, h), ...): the engine stands them in as symbols
+#: while differentiating (modelgen.model.perturbation.linearization); a new mechanization's module lists its own
+EARTH_FUNCTIONS: tuple[type, ...] = tuple(f for module in (local_level, ecef, wander_azimuth) for f in module.EARTH_FUNCTIONS)
 #: The navigation frames (a model file's ``frame``) each mechanization resolves its vectors in.
 MECHANIZATION_FRAMES: dict[str, tuple[str, ...]] = {
     "local_level": ("NED", "ENU"), "ecef": ("ECEF",), "wander_azimuth": (wander_azimuth.FRAME,),

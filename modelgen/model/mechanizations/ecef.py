@@ -40,6 +40,8 @@ NavigationState = "modelgen.model.perturbation.problem.NavigationState"
 #: radii of curvature): the gravity gradient then reads in r = |r^e| (parameter ``geocentric_radius``), with
 #: d|r|/dx = x/|r| by the chain rule, instead of (x^2 + y^2 + z^2)^(7/2) expanded into polynomials.
 GeocentricRadius = sp.Function("GeocentricRadius")
+#: the Earth functions this mechanization's equations hold (the engine differentiates them by their rules)
+EARTH_FUNCTIONS = (GeocentricRadius,)
 
 #: The frame of every vector of this mechanization, and its axes in component order.
 FRAME = "ECEF"

@@ -26,6 +26,8 @@ FRAME_AXES: dict[str, tuple[str, str, str]] = {"NED": ("north", "east", "down"),
 MeridianRadius = sp.Function("MeridianRadius")
 PrimeVerticalRadius = sp.Function("PrimeVerticalRadius")
 Gravity = sp.Function("Gravity")
+#: the Earth functions this mechanization's equations hold (the engine differentiates them by their rules)
+EARTH_FUNCTIONS = (MeridianRadius, PrimeVerticalRadius, Gravity)
 
 # -- vector helpers ---------------------------------------------------------------
 def skew(a: sp.Matrix) -> sp.Matrix:

@@ -15,9 +15,8 @@ from typing import Mapping, Sequence
 
 import sympy as sp
 
-from modelgen.model.mechanizations.ecef import GeocentricRadius
-from modelgen.model.mechanizations.local_level import Gravity, MeridianRadius, PrimeVerticalRadius, _vector, skew
-from modelgen.model.mechanizations.wander_azimuth import EARTH_FUNCTIONS as WANDER_EARTH_FUNCTIONS
+from modelgen.model.mechanizations import EARTH_FUNCTIONS
+from modelgen.model.mechanizations.local_level import _vector, skew
 from modelgen.model.perturbation.problem import (
     Mechanization,
     NavigationProblem,
@@ -109,7 +108,7 @@ def _jacobian(matrix: sp.Matrix, by: Sequence[sp.Symbol]) -> sp.Matrix:
     """
     variables = set(by)
     applied = sorted(
-        (a for a in matrix.atoms(MeridianRadius, PrimeVerticalRadius, Gravity, GeocentricRadius, *WANDER_EARTH_FUNCTIONS) if variables & set(a.args)),
+        (a for a in matrix.atoms(*EARTH_FUNCTIONS) if variables & set(a.args)),
         key=sp.default_sort_key,
     )
     stand_in = {a: sp.Dummy(f"earth_{k}", real=True) for k, a in enumerate(applied)}
