@@ -115,7 +115,7 @@ def presets(results: Results) -> str:
             f"at T = 60 s ({_signed(100 * (host60['wall_ns'] / portable60['wall_ns'] - 1))} %) and "
             f"{host1['wall_ns']:,.0f} ns against {portable1['wall_ns']:,.0f} ns at T = 1 s; `-O3` alone gains "
             f"{gains[0]:.1f}–{gains[1]:.1f} % ({o3_60['instructions']:,.0f} instructions against "
-            f"{portable60['instructions']:,.0f}), so the gain is `-march=native`'s (callgrind cannot count its "
+            f"{portable60['instructions']:,.0f}); the rest of `host`'s gain is `-march=native`'s (callgrind cannot count its "
             f"AVX-512 code). `.text` of the float filter for the Cortex-M4F: {text['cortex-m4f'] / 1000:.1f} kB at "
             f"`-O2`, {text['cortex-m4f-size'] / 1000:.1f} kB at `-Os`")
 
