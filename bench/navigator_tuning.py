@@ -189,12 +189,8 @@ def correlation(arguments: list[str]) -> None:
     shipped, config, inputs, spec = _stage_start(arguments)
     result = tuning.correlation_tuning(config, inputs, spec)
     print(tuning.format_result(result))
-    fields = {"gnss.position_variance_factor": "gnss_position_variance_factor",
-              "gnss.velocity_variance_factor": "gnss_velocity_variance_factor",
-              "nhc.sigma_lateral_m_s": "nhc_sigma_lateral", "nhc.sigma_vertical_m_s": "nhc_sigma_vertical",
-              "zupt.sigma_m_s": "zupt_sigma"}
     for t in result["tuned"]:
-        held = getattr(shipped, fields[t["key"]])
+        held = getattr(shipped, tuning.CONFIG_FIELDS[t["key"]])
         same = math.isclose(held, t["after"], rel_tol=0.01)
         print(f"  {shipped.path}: {t['key']} = {held:.4g} ({'the value above' if same else 'NOT the value above'})")
     if out_json:

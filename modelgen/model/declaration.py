@@ -682,7 +682,7 @@ def _check_defined(expr: sp.Expr, text: str, where: str) -> None:
     power = _largest_power_of_a_sum(expr)
     if power > MAX_EXPONENT:
         raise ModelError(
-            f"{where}: {shown()} raises a sum to the power {power} once the definitions it uses are written out "
+            f"{where}: {shown()} raises a sum to the power {power} once the definitions or entries it refers to are written out "
             f"(at most {MAX_EXPONENT}: its expansion's coefficients grow with the power, past what sympy multiplies "
             "out in reasonable time)"
         )

@@ -37,7 +37,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from modelgen.navigator.config import NavigatorConfig
-from modelgen.navigator.tuning import Innovations, record_innovations
+from modelgen.navigator.tuning import CONFIG_FIELDS, Innovations, record_innovations
 
 #: the parameters the search can estimate: configuration key -> what setting it changes.  The two white noises
 #: share one factor (one vibration environment: the data cannot tell the two apart, stage 1 of
@@ -58,10 +58,6 @@ PARAMETERS = ("noise.gyro_white.factor", "noise.gyro_bias_driving.factor", "nois
 #: white-noise factor's gain is about 2,300 (bench/results/navigator_tuning_stage5_three_noises_*.log).
 PROCESS_NOISE = PARAMETERS[:1]
 
-_FIELDS = {"gnss.position_variance_factor": "gnss_position_variance_factor",
-           "gnss.velocity_variance_factor": "gnss_velocity_variance_factor",
-           "nhc.sigma_lateral_m_s": "nhc_sigma_lateral", "nhc.sigma_vertical_m_s": "nhc_sigma_vertical",
-           "zupt.sigma_m_s": "zupt_sigma"}
 _TIED = {"noise.gyro_white.factor": ("gyro_white", "accel_white")}
 
 
@@ -83,7 +79,7 @@ def parameter_value(config: NavigatorConfig, key: str) -> float:
     """The configured value of one :data:`PARAMETERS` key."""
     if key.startswith("noise."):
         return config.noise[key.split(".")[1]].factor
-    return float(getattr(config, _FIELDS[key]))
+    return float(getattr(config, CONFIG_FIELDS[key]))
 
 
 def with_parameters(config: NavigatorConfig, values: dict[str, float]) -> NavigatorConfig:
@@ -96,7 +92,7 @@ def with_parameters(config: NavigatorConfig, values: dict[str, float]) -> Naviga
                 entry = noise[kind]
                 noise[kind] = dataclasses.replace(entry, factor=value, si=entry.si / entry.factor * value)
         else:
-            fields[_FIELDS[key]] = value
+            fields[CONFIG_FIELDS[key]] = value
     return dataclasses.replace(config, noise=noise, **fields)
 
 

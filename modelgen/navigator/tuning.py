@@ -50,6 +50,13 @@ from modelgen.navigator.config import NavigatorConfig
 MAX_LAG_S = 20.0
 
 
+#: the measurement-noise keys the innovations set (stage 4) -> the NavigatorConfig field each one is
+CONFIG_FIELDS = {"gnss.position_variance_factor": "gnss_position_variance_factor",
+                 "gnss.velocity_variance_factor": "gnss_velocity_variance_factor",
+                 "nhc.sigma_lateral_m_s": "nhc_sigma_lateral", "nhc.sigma_vertical_m_s": "nhc_sigma_vertical",
+                 "zupt.sigma_m_s": "zupt_sigma"}
+
+
 @dataclass
 class Innovations:
     """Every update of one aiding sensor tried in a flight, in time order."""
@@ -236,11 +243,7 @@ def tune(config: NavigatorConfig, stats: list[RowStatistic], spec) -> list[Tuned
 
 def apply(config: NavigatorConfig, tuned: list[Tuned]) -> NavigatorConfig:
     """The configuration with the tuned numbers in place."""
-    fields = {"gnss.position_variance_factor": "gnss_position_variance_factor",
-              "gnss.velocity_variance_factor": "gnss_velocity_variance_factor",
-              "nhc.sigma_lateral_m_s": "nhc_sigma_lateral", "nhc.sigma_vertical_m_s": "nhc_sigma_vertical",
-              "zupt.sigma_m_s": "zupt_sigma"}
-    return dataclasses.replace(config, **{fields[t.key]: t.after for t in tuned})
+    return dataclasses.replace(config, **{CONFIG_FIELDS[t.key]: t.after for t in tuned})
 
 
 @dataclass(frozen=True)
