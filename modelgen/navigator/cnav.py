@@ -49,6 +49,8 @@ REST_MAX = 1024
 ALIGNMENT_ERRORS = {
     13: "the rest window held more IMU samples than the C navigator was built to keep (its ring overflowed)",
     14: "an aiding sample named a sensor slot the C navigator does not have",
+    17: "a carried state (an aiding sensor's own error) has no steady state at the alignment: its Gauss-Markov rate "
+        "is not positive at the configured parameters",
 }
 
 
@@ -79,7 +81,9 @@ def template_context(spec: NavigatorSpec) -> dict:
     output = [None, None, None]
     for i, a, sg in zip(pos.indices, pos.axes, pos.signs):
         output[a] = (i, _literal(sg * (-1.0 if a == 2 else 1.0)))
-    return {**aiding_context(), "blocks": blocks, "sensor_targets": [(k, SENSOR_TARGETS[k]) for k in SENSOR_BLOCKS if k in spec.blocks],
+    carried = list(spec.carried)
+    return {**aiding_context(), "blocks": blocks, "carried": carried,
+            "carried_of": [carried.index(i) if i in carried else -1 for i in range(spec.n_states)], "sensor_targets": [(k, SENSOR_TARGETS[k]) for k in SENSOR_BLOCKS if k in spec.blocks],
             "parameters": parameters, "position_output": output,
             "gnss_rows": [{"kind": r.kind, "axis": r.axis, "sign": _literal(r.sign), "sigma_index": r.sigma_index}
                           for r in spec.gnss_rows],
@@ -418,7 +422,8 @@ def flight_from_outputs(out: np.ndarray, arrays: LogArrays, inputs: Inputs, coun
                   float(arrays.cfg["gate_gnss"]), counts, list(inputs.notes), alignment, estimated=estimated)
 
 
-#: Entries of a recorded nominal state (NAV_RECORD_NOMINAL): the navigation vector, then the sensor estimates.
+#: Entries of a recorded nominal state (NAV_RECORD_NOMINAL): the navigation vector, then the sensor estimates, then
+#: the carried estimates (NavigatorSpec.carried).
 NAV_SIZE = 10
 RECORD_SENSORS = ("gyro_bias", "accel_bias", "gyro_scale_factor", "accel_scale_factor")
 
@@ -449,7 +454,7 @@ class RecordBuffers:
     output_corrections_before: np.ndarray
 
     @classmethod
-    def sized(cls, arrays: "LogArrays", n: int, table=SENSORS) -> "RecordBuffers":
+    def sized(cls, arrays: "LogArrays", n: int, table=SENSORS, n_carried: int = 0) -> "RecordBuffers":
         """Capacities: a covariance step closes every predict_samples IMU samples or at a GNSS epoch (steps <=
         n_imu / predict_samples + epochs + the alignment's), each step tries every step sensor once and each
         epoch makes at most one GNSS update (corrections <= steps x step sensors + epochs), one output per epoch."""
@@ -458,7 +463,7 @@ class RecordBuffers:
         corrections = steps * len(step_sensors(table)) + epochs
         return cls(np.zeros((steps, n, n)), np.zeros((steps, n, n)), np.zeros((steps, n, n)),
                    np.zeros(steps + 1, dtype=ctypes.c_long), np.zeros((max(corrections, 1), n)),
-                   np.zeros((max(epochs, 1), NAV_SIZE + 12)), np.zeros(max(epochs, 1), dtype=ctypes.c_long),
+                   np.zeros((max(epochs, 1), NAV_SIZE + 12 + n_carried)), np.zeros(max(epochs, 1), dtype=ctypes.c_long),
                    np.zeros(max(epochs, 1), dtype=ctypes.c_long))
 
     def structure(self) -> RecordStruct:
@@ -499,6 +504,7 @@ def forward_record_from_c(buffers: RecordBuffers, counts: RecordStruct, spec: Na
         row = out[j]
         nominal = buffers.nominal[i]
         sensors = {name: nominal[NAV_SIZE + 3 * b:NAV_SIZE + 3 * b + 3].copy() for b, name in enumerate(RECORD_SENSORS)}
+        sensors["carried"] = nominal[NAV_SIZE + 12:NAV_SIZE + 12 + len(spec.carried)].copy()
         k = int(arrays.target[j])
         record.outputs.append(OutputSnapshot(int(buffers.output_step[i]), int(buffers.output_corrections_before[i]),
                                              nominal[:NAV_SIZE].copy(), sensors,
@@ -524,7 +530,7 @@ def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator, record
                          "samples, alignment speeds and window, initial sigmas)")
     buffers = counts = None
     if record:
-        buffers = RecordBuffers.sized(a, navigator.spec.n_states)
+        buffers = RecordBuffers.sized(a, navigator.spec.n_states, n_carried=len(navigator.spec.carried))
         counts = buffers.structure()
         if navigator.set_record(state, ctypes.byref(counts)):
             raise ModelError("smoother: the C navigator refused the forward record's buffers")
