@@ -52,6 +52,14 @@ error (model ins_gnss24_gm_nav, configuration replay_drive_0708_gm.yaml; docs/re
    white-noise factor, tau and sigma_e, k = 3);
 4. then the whiteness of the new position innovations (stage 4's statistics) and every sensor's NIS.
 
+Stage 6b (``--markov-check [STAGE6_JSON] [--json FILE]``): stage 6's search drove sigma_e to the boundary
+(0.4 mm, tau unbounded): its gain in log L over the 21-state configuration came from R at its white value,
+not from the states.  The 21-state configuration's R x f is not a likelihood estimate, so the decision is
+taken again against the 21-state model at its own maximum likelihood with the position R white (the
+white-noise factor, k = 1), beside a profile of log L over sigma_e at tau = 2 s (stage 4's decorrelation
+time): the augmented model is adopted only if it beats both 21-state configurations on AIC and BIC.  This
+check was added after stage 6's likelihoods were seen and before any outage was flown.
+
 No outage is flown and no outage error is computed here: the choice cannot
 see them.  Prints a table and the chosen values, which go into
 modelgen/data/replay_drive_0708.yaml by hand (with this script named there).
@@ -61,6 +69,7 @@ modelgen/data/replay_drive_0708.yaml by hand (with this script named there).
     python bench/navigator_tuning.py --correlation [CONFIG] [--json FILE]   # stage 4 (about a minute)
     python bench/navigator_tuning.py --likelihood [CONFIG] [--json FILE]    # stage 5 (about half an hour)
     python bench/navigator_tuning.py --markov [CONFIG] [--json FILE]        # stage 6 (about half an hour)
+    python bench/navigator_tuning.py --markov-check [STAGE6_JSON] [--json FILE]   # stage 6b (a few minutes)
 """
 
 from __future__ import annotations
@@ -354,6 +363,68 @@ def markov(arguments: list[str]) -> None:
         print(f"written {out_json}")
 
 
+def markov_check(arguments: list[str]) -> None:
+    """Stage 6b (module docstring): the decision against the 21-state model at its own maximum likelihood."""
+    import json
+    import time
+
+    from modelgen.navigator import likelihood as ml
+    from modelgen.navigator import tuning
+    from modelgen.navigator.config import load_config
+    from modelgen.navigator.errorstate import model_path
+    from modelgen.navigator.logs import read_gnss, read_imu
+    from modelgen.navigator.navigator import prepare
+    from modelgen.navigator.spec import navigator_spec
+    from modelgen.fileio.datafiles import package_path
+
+    out_json, arguments = _json_option(arguments)
+    stage6 = json.loads(Path(arguments[0] if arguments else "bench/results/navigator_tuning_stage6_gm.json").read_text())
+    baseline = load_config(package_path("data", "replay_drive_0708_21.yaml"))
+    shipped = load_config(package_path("data", "replay_drive_0708_gm.yaml"))
+    inputs = prepare(baseline, read_imu(baseline.imu_source, baseline.gap_factor, baseline.gap_action),
+                     read_gnss(baseline.gnss_source))
+    spec21 = navigator_spec(model_path(baseline.model, baseline.path))
+    spec = navigator_spec(model_path(shipped.model, shipped.path))
+    started = time.time()
+
+    def progress(flights: int, total: float, values: dict[str, float]) -> None:
+        print(f"  flight {flights:3d} ({time.time() - started:6.0f} s): log L {total:10.1f}  "
+              + " ".join(f"{k}={v:.4g}" for k, v in values.items()), flush=True)
+
+    white21 = dataclasses.replace(baseline, gnss_position_variance_factor=1.0)
+    print("stage 6b: 21 states, position R white: maximum likelihood over the white-noise factor (GNSS present)")
+    estimate21 = ml.maximum_likelihood(white21, ml.gnss_present_innovations(inputs, spec21),
+                                       ("noise.gyro_white.factor",), progress=progress)
+    l21w = estimate21.log_likelihood_after
+    n_updates = stage6["criteria"]["ins_gnss21_rw_nav (R x f)"]["updates"]
+    factor = stage6["estimate"]["after"]["noise.gyro_white.factor"]
+    print(f"profile of log L over sigma_e at tau = 2 s, 24 states, white-noise factor {factor:.4g}:")
+    profile = []
+    for sigma in (0.001, 0.003, 0.01, 0.02, 0.05):
+        config = ml.with_parameters(shipped, {"noise.gyro_white.factor": factor, "parameters.gnss_error_time": 2.0,
+                                              "parameters.gnss_error_sigma": sigma})
+        total = ml.log_likelihood(ml.gnss_present_innovations(inputs, spec)(config))["total"]
+        profile.append({"tau_s": 2.0, "sigma_e_m": sigma, "log_likelihood": total})
+        print(f"   sigma_e {sigma:6.3f} m: log L {total:10.1f}", flush=True)
+    criteria = {"ins_gnss21_rw_nav (R x f)": stage6["criteria"]["ins_gnss21_rw_nav (R x f)"],
+                "ins_gnss21_rw_nav (R white)": ml.information_criteria(l21w["total"], 1, n_updates),
+                "ins_gnss24_gm_nav (Gauss-Markov)": stage6["criteria"]["ins_gnss24_gm_nav (Gauss-Markov)"]}
+    print("decision (log L with GNSS present; AIC, BIC):")
+    for name, c in criteria.items():
+        print(f"   {name:34} log L {c['log_likelihood']:10.1f}  k {c['parameters']}  AIC {c['aic']:10.1f}  "
+              f"BIC {c['bic']:10.1f}")
+    gm = criteria["ins_gnss24_gm_nav (Gauss-Markov)"]
+    better = all(gm["aic"] < c["aic"] and gm["bic"] < c["bic"] for name, c in criteria.items() if "24" not in name)
+    print(f"   white-noise factor, 21 states R white: {estimate21.before['noise.gyro_white.factor']:.4g} -> "
+          f"{estimate21.after['noise.gyro_white.factor']:.4g} ({estimate21.flights} flights)")
+    print(f"   -> {'the Gauss-Markov model is better than both: adopted' if better else 'the Gauss-Markov model is NOT better than the 21-state model at its own estimate: not adopted'}")
+    if out_json:
+        result = {"estimate_21_white": dataclasses.asdict(estimate21), "profile": profile, "criteria": criteria,
+                  "adopted": better}
+        Path(out_json).write_text(json.dumps(result, indent=2, default=float) + "\n")
+        print(f"written {out_json}")
+
+
 if __name__ == "__main__":
     if sys.argv[1:] == ["--stage3"]:
         stage3()
@@ -363,5 +434,7 @@ if __name__ == "__main__":
         likelihood(sys.argv[2:])
     elif sys.argv[1:2] == ["--markov"]:
         markov(sys.argv[2:])
+    elif sys.argv[1:2] == ["--markov-check"]:
+        markov_check(sys.argv[2:])
     else:
         main()
