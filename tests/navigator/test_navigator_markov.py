@@ -207,3 +207,20 @@ def test_the_24_state_model_flies_alike_in_python_and_c_and_its_states_change_th
     ok = ~np.isnan(off.outputs[:, 1]) & ~np.isnan(both.flight.outputs[:, 1])
     metres = np.abs(off.outputs[ok, 1:3] - both.flight.outputs[ok, 1:3]) * 6.37e6
     assert metres.max() > 5e-3
+
+
+@pytest.mark.compile
+@pytest.mark.flight
+def test_the_smoother_carries_the_error_states_alike_from_the_c_and_the_python_forward_record():
+    """replay --smooth on the 24-state excerpt: the C navigator's forward record (its nominal with the carried
+    estimates) and the Python one's give the same smoothed trajectory, better than the forward one in the outage."""
+    from modelgen.navigator.replay import run_replay
+
+    results = {nav: run_replay(DATA / "excerpt_24.yaml", None, echo=lambda _: None, navigator=nav, smooth=True)
+               for nav in ("c", "python")}
+    c, python = (results[n].smoothed.outputs for n in ("c", "python"))
+    ok = ~np.isnan(c[:, 1])
+    assert np.array_equal(ok, ~np.isnan(python[:, 1]))
+    assert np.max(np.abs(c[ok, 1:3] - python[ok, 1:3])) * 6.37e6 <= 1e-3
+    smoothed = results["c"].summary["smoothed"]
+    assert smoothed["smoothed"]["horizontal_error_outage_rms_m"] < 0.5 * smoothed["forward"]["horizontal_error_outage_rms_m"]
