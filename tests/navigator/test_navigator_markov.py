@@ -224,3 +224,21 @@ def test_the_smoother_carries_the_error_states_alike_from_the_c_and_the_python_f
     assert np.max(np.abs(c[ok, 1:3] - python[ok, 1:3])) * 6.37e6 <= 1e-3
     smoothed = results["c"].summary["smoothed"]
     assert smoothed["smoothed"]["horizontal_error_outage_rms_m"] < 0.5 * smoothed["forward"]["horizontal_error_outage_rms_m"]
+
+
+def test_a_state_the_navigator_can_neither_feed_back_nor_carry_is_refused_naming_it(tmp_path):
+    """A second gyro bias (summed Gauss-Markov drift) enters the attitude rates: it is not an aiding sensor's own
+    error, and the navigator has no feedback for it, so it is refused instead of flown with P0 = 0 and reset."""
+    from modelgen.navigator.spec import navigator_spec
+
+    text = (MODELS / "ins_gnss21_rw_nav.yaml").read_text()
+    line = '    - {of: gyro_bias, process: random_walk, psd: "N_bg**2"}\n'
+    assert line in text
+    path = tmp_path / "summed_drift_nav.yaml"
+    path.write_text(text.replace(line, line + (
+        '    - {of: gyro_bias, process: gauss_markov, rate: "1/300", sigma: "1e-4", symbols: [m_gx, m_gy, m_gz], '
+        'names: [gyro_markov_x, gyro_markov_y, gyro_markov_z], noise_symbols: [w_mx, w_my, w_mz], '
+        'noise_names: [gyro_markov_noise_x, gyro_markov_noise_y, gyro_markov_noise_z]}\n')))
+    with pytest.raises(ModelError, match=r"summed_drift_nav\.yaml: the navigator cannot fly state 'gyro_markov_x'.*"
+                                         r"coupled to attitude_error_north"):
+        navigator_spec(path, with_python=False)
