@@ -48,11 +48,21 @@ ALIGNMENT_NAMES = ("time", "roll", "pitch", "heading", "rest_end", "rest_samples
 #: IMU samples the C keeps for its alignment by default ({P}_NAV_REST_MAX in the header); a configuration whose
 #: rest window needs more is built with a larger ring (:func:`rest_capacity`, -D{P}_NAV_REST_MAX)
 REST_MAX = 1024
-#: the C's alignment statuses (header: {P}_NAV_ERR_*); 11 and 12 are explained by the Python rules' diagnosis
-ALIGNMENT_ERRORS = {
-    13: "the rest window held more IMU samples than the C navigator was built to keep (its ring overflowed)",
-    14: "an aiding sample named a sensor slot the C navigator does not have",
+#: the C navigator's own statuses after the filter's 1 and 2 (header {P}_NAV_ERR_<name>, rendered from this table):
+#: name -> (status, meaning); NO_REST and FEW_REST are explained by the Python rules' diagnosis
+NAV_STATUS = {
+    "NO_REST": (11, "a used epoch faster than config.heading_speed came before any rest window"),
+    "FEW_REST": (12, "fewer than 10 IMU samples in the rest window"),
+    "REST_OVERFLOW": (13, "the rest window held more IMU samples than the C navigator was built to keep "
+                          "(its ring overflowed)"),
+    "AID_SLOT": (14, "an aiding sample named a sensor slot the C navigator does not have"),
+    "RECORD_FULL": (15, "the forward record's buffers are full (navigator_set_record)"),
+    "GNSS_UPDATE": (16, "an ecef model's GNSS update (dense rows) met a covariance that is not positive"),
 }
+#: the alignment statuses whose meaning is the error itself
+ALIGNMENT_ERRORS = {NAV_STATUS[name][0]: NAV_STATUS[name][1] for name in ("REST_OVERFLOW", "AID_SLOT")}
+#: NAV_ERR_RECORD_FULL of the navigator header.
+RECORD_FULL = NAV_STATUS["RECORD_FULL"][0]
 
 
 def earth_constants() -> dict[str, str]:
@@ -91,7 +101,7 @@ def template_context(spec: NavigatorSpec) -> dict:
             "rows_max": max(6, len(spec.gnss_rows)), "n_free": len(free), "free_names": ", ".join(free) or "none",
             "config_struct": cconfig.c_struct(spec.name, len(free)), "mechanization_rates": spec.rates_c,
             "config_checks": cconfig.c_checks(spec.name.upper(), len(free)), "window_max": cconfig.WINDOW_MAX,
-            "rest_max": REST_MAX,
+            "rest_max": REST_MAX, "nav_status": NAV_STATUS,
             "out": OUT, "n_output": N_OUTPUT}
 
 
@@ -400,7 +410,7 @@ def alignment_error(config: NavigatorConfig, inputs: Inputs, status: int) -> Mod
     """The error for a C navigator status: an alignment failure is explained by the Python rules' own diagnosis."""
     if status in ALIGNMENT_ERRORS:
         return ModelError(f"{inputs.gnss.path}: C navigator alignment: {ALIGNMENT_ERRORS[status]}")
-    if status in (11, 12):
+    if status in (NAV_STATUS["NO_REST"][0], NAV_STATUS["FEW_REST"][0]):
         return not_aligned_error(config, inputs)
     return ModelError(f"C navigator: a filter step failed (status {status})")
 
@@ -577,5 +587,3 @@ def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator, record
     return flight, cpu
 
 
-#: NAV_ERR_RECORD_FULL of the navigator header.
-RECORD_FULL = 15
