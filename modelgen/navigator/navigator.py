@@ -20,6 +20,7 @@ from modelgen.errors import ModelError
 from modelgen.navigator.alignment import Alignment, align  # noqa: F401  (the alignment lives in alignment.py)
 from modelgen.navigator.config import NavigatorConfig
 from modelgen.navigator import cconfig
+from modelgen.navigator.cconfig_fields import WINDOW_SAMPLES_MIN
 from modelgen.navigator import ecef
 from modelgen.navigator.errorstate import ErrorStateFilter, rotate
 from modelgen.navigator.logs import GnssLog, ImuLog, ScalarLog, check_logs, epochs_inside_gaps, read_scalar
@@ -123,7 +124,7 @@ def read_aiding_logs(config: NavigatorConfig) -> dict[str, ScalarLog]:
 def stationary_mask(time: np.ndarray, force: np.ndarray, rate: np.ndarray, gyro_bias: np.ndarray,
                     window: float, gyro_max: float, accel_std_max: float) -> np.ndarray:
     """Per sample: the window of ``window`` seconds ending there is still (causal, IMU only)."""
-    n = max(2, int(round(window / float(np.median(np.diff(time))))))
+    n = max(WINDOW_SAMPLES_MIN, int(round(window / float(np.median(np.diff(time))))))
     rate_norm = np.linalg.norm(rate - gyro_bias, axis=1)
     force_norm = np.linalg.norm(force, axis=1)
     still = np.zeros(len(time), dtype=bool)
@@ -256,8 +257,14 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
     step = max(1, int(round(config.predict_period / median_dt)))
     from modelgen.navigator.alignment import still_window_samples
 
-    cfg = cconfig.namespace(cconfig.values(config, spec, max(2, int(round(config.zupt_window / median_dt))), step,
-                                           still_window_samples(config, time), table))
+    values = cconfig.values(config, spec, max(WINDOW_SAMPLES_MIN, int(round(config.zupt_window / median_dt))), step,
+                            still_window_samples(config, time), table)
+    # the C navigator's own configuration check (cconfig.bounds), so that both refuse the same configurations; the
+    # alignment ring's capacity is the C's alone (its ring is sized from the configuration: cnav.rest_capacity)
+    refused = cconfig.check(values, {"WINDOW_MAX": cconfig.WINDOW_MAX})
+    if refused is not None:
+        raise cconfig.refusal(config.path, refused, values[refused.name], {"WINDOW_MAX": cconfig.WINDOW_MAX}, "Python")
+    cfg = cconfig.namespace(values)
     speed0 = float(np.hypot(g.velocity[j0, 0], g.velocity[j0, 1]))
     sv = float(np.hypot(g.sigma_velocity[j0, 0], g.sigma_velocity[j0, 1]))
     heading_sigma = math.hypot(math.atan2(sv, speed0), config.heading_extra_sigma)
