@@ -194,8 +194,9 @@ def pack(field_values: dict, n_parameters: int) -> bytes:
 
 # --- where each field's value may lie: from the field list and the replay configuration's schema -------------------
 
-#: the C navigator's fixed capacities a field may be bounded by (header ``<P>_NAV_<name>``); REST_MAX is the
-#: alignment ring's, set per build (modelgen.navigator.cnav.rest_capacity)
+#: the C navigator's default capacities a field may be bounded by (header ``<P>_NAV_<name>``), each set per build
+#: from the configuration and the log: WINDOW_MAX the zero-velocity detector's window (modelgen.navigator.cnav.
+#: window_capacity), REST_MAX the alignment ring (cnav.rest_capacity)
 WINDOW_MAX = 256
 #: the status of the first refused field is CONFIG_STATUS_BASE + its index in FIELDS (``<P>_NAV_ERR_CONFIG_<NAME>``)
 CONFIG_STATUS_BASE = 32

@@ -48,6 +48,9 @@ ALIGNMENT_NAMES = ("time", "roll", "pitch", "heading", "rest_end", "rest_samples
 #: IMU samples the C keeps for its alignment by default ({P}_NAV_REST_MAX in the header); a configuration whose
 #: rest window needs more is built with a larger ring (:func:`rest_capacity`, -D{P}_NAV_REST_MAX)
 REST_MAX = 1024
+#: the zero-velocity detector's window buffer by default ({P}_NAV_WINDOW_MAX); a configuration whose ZUPT window
+#: needs more samples is built with a larger one (:func:`window_capacity`, -D{P}_NAV_WINDOW_MAX)
+WINDOW_MAX = cconfig.WINDOW_MAX
 #: the C navigator's own statuses after the filter's 1 and 2 (header {P}_NAV_ERR_<name>, rendered from this table):
 #: name -> (status, meaning); NO_REST and FEW_REST are explained by the Python rules' diagnosis
 NAV_STATUS = {
@@ -104,7 +107,7 @@ def template_context(spec: NavigatorSpec) -> dict:
             "ecef": spec.ecef, "gnss_rotation": _gnss_rotation(spec),
             "rows_max": max(6, len(spec.gnss_rows)), "n_free": len(free), "free_names": ", ".join(free) or "none",
             "config_struct": cconfig.c_struct(spec.name, len(free)), "mechanization_rates": spec.rates_c,
-            "config_checks": cconfig.c_checks(spec.name.upper(), len(free)), "window_max": cconfig.WINDOW_MAX,
+            "config_checks": cconfig.c_checks(spec.name.upper(), len(free)), "window_max": WINDOW_MAX,
             "rest_max": REST_MAX, "nav_status": NAV_STATUS,
             "out": OUT, "n_output": N_OUTPUT}
 
@@ -155,10 +158,11 @@ def generate_c_navigator(spec: NavigatorSpec, folder: Path) -> Path:
 class CNavigator:
     """The compiled navigator library (one model)."""
 
-    def __init__(self, library: Path, spec: NavigatorSpec, rest_max: int = REST_MAX):
+    def __init__(self, library: Path, spec: NavigatorSpec, rest_max: int = REST_MAX, window_max: int = WINDOW_MAX):
         self.spec = spec
         self.model = spec.name
         self.rest_max = rest_max  # the alignment ring it was built with
+        self.window_max = window_max  # the zero-velocity detector's window buffer it was built with
         self.lib = ctypes.CDLL(str(library))
         self.size = int(self._fn("navigator_size", [], ctypes.c_ulong)())
         dp = ctypes.POINTER(ctypes.c_double)
@@ -240,18 +244,21 @@ SMOOTH_STATUS = {1: "non-finite input or result", 2: "a prior covariance is not 
                  3: "a transition entry outside the pattern of Phi, or correction_start does not index the corrections"}
 
 
-def rest_define(model: str, rest_max: int) -> str:
-    """The compiler flag that sizes the C's alignment ring."""
-    return f"-D{model.upper()}_NAV_REST_MAX={int(rest_max)}"
+def capacity_defines(model: str, rest_max: int, window_max: int = WINDOW_MAX) -> tuple[str, str]:
+    """The compiler flags that size the C's buffers: the alignment ring and the zero-velocity detector's window."""
+    return (f"-D{model.upper()}_NAV_REST_MAX={int(rest_max)}", f"-D{model.upper()}_NAV_WINDOW_MAX={int(window_max)}")
 
 
-def build_c_navigator(spec: NavigatorSpec, folder: Path, rest_max: int = REST_MAX) -> CNavigator:
-    """Generate, compile (strict C99, -O2) and load the navigator for a spec (ring of ``rest_max`` samples)."""
+def build_c_navigator(spec: NavigatorSpec, folder: Path, rest_max: int = REST_MAX,
+                      window_max: int = WINDOW_MAX) -> CNavigator:
+    """Generate, compile (strict C99, -O2) and load the navigator for a spec (ring of ``rest_max`` samples, detector
+    window of ``window_max``)."""
     folder = generate_c_navigator(spec, folder)
     model = spec.name
     library = compile_shared_library([folder / f"{model}.c", folder / f"{model}_navigator.c"],
-                                     folder / f"lib{model}_navigator.so", ("-O2", rest_define(model, rest_max)))
-    return CNavigator(library, spec, rest_max)
+                                     folder / f"lib{model}_navigator.so",
+                                     ("-O2", *capacity_defines(model, rest_max, window_max)))
+    return CNavigator(library, spec, rest_max, window_max)
 
 
 def rest_capacity(config: NavigatorConfig, time: np.ndarray) -> int:
@@ -268,6 +275,15 @@ def rest_capacity(config: NavigatorConfig, time: np.ndarray) -> int:
     return max(REST_MAX, 1 << (need - 1).bit_length())
 
 
+def window_capacity(config: NavigatorConfig, time: np.ndarray) -> int:
+    """The zero-velocity detector's window buffer the C needs: the ZUPT window's samples at the log's median IMU
+    rate (as the configuration's field is computed) plus one, rounded up to a power of two, at least
+    :data:`WINDOW_MAX`.  A 1 kHz IMU with a 0.5-s window needs 512."""
+    median_dt = float(np.median(np.diff(np.asarray(time, float))))
+    need = max(WINDOW_SAMPLES_MIN, int(round(config.zupt_window / median_dt))) + 1
+    return max(WINDOW_MAX, 1 << (need - 1).bit_length())
+
+
 def cache_folder() -> Path:
     """Where compiled navigators are kept between runs: the compile cache's folder
     (:func:`modelgen.codegen.build.library_cache_folder`: $MODELGEN_CACHE_DIR, else $XDG_CACHE_HOME/modelgen, else
@@ -277,11 +293,11 @@ def cache_folder() -> Path:
     return library_cache_folder()
 
 
-def navigator_key(model_file: Path, rest_max: int) -> str:
+def navigator_key(model_file: Path, rest_max: int, window_max: int = WINDOW_MAX) -> str:
     """The cache key of a compiled navigator: what the library is made from, without deriving the model.
 
     The sha256 of the model file, the navigator templates, the filter's templates and printer (everything under
-    modelgen/codegen/backends), modelgen's version, the alignment ring's size and the compiler's identity.
+    modelgen/codegen/backends), modelgen's version, the alignment ring's and detector window's sizes and the compiler's identity.
     """
     from modelgen.codegen.build import STRICT_FLAGS, compiler, compiler_identity
     from modelgen.fileio.datafiles import data_path
@@ -299,21 +315,21 @@ def navigator_key(model_file: Path, rest_max: int) -> str:
     sources += [codegen / "mechanization.py", codegen.parent / "derivation" / "mechanization_rates.py"]
     for template in sources:
         digest.update(template.name.encode() + template.read_bytes())
-    digest.update(f"\nrest_max {int(rest_max)}\nflags {' '.join(STRICT_FLAGS)} -O2\n".encode())
+    digest.update(f"\nrest_max {int(rest_max)}\nwindow_max {int(window_max)}\nflags {' '.join(STRICT_FLAGS)} -O2\n".encode())
     digest.update(compiler_identity(compiler()).encode())
     return "navigator-" + digest.hexdigest()
 
 
-def _load_payload(payload: bytes, spec: NavigatorSpec, rest_max: int) -> CNavigator:
+def _load_payload(payload: bytes, spec: NavigatorSpec, rest_max: int, window_max: int) -> CNavigator:
     """Load a library from its bytes: written to a private temporary file, loaded, the file removed."""
     with tempfile.TemporaryDirectory(prefix="modelgen-navigator-") as folder:
         library = Path(folder) / f"lib{spec.name}_navigator.so"
         library.write_bytes(payload)
-        return CNavigator(library, spec, rest_max)
+        return CNavigator(library, spec, rest_max, window_max)
 
 
 def cached_c_navigator(spec: NavigatorSpec, echo=lambda message: None,
-                       rest_max: int = REST_MAX) -> tuple[CNavigator, bool]:
+                       rest_max: int = REST_MAX, window_max: int = WINDOW_MAX) -> tuple[CNavigator, bool]:
     """The compiled navigator for a spec's model file, from the compile cache when its inputs are unchanged.
 
     Key: :func:`navigator_key`.  The entry is the compile cache's (:mod:`modelgen.codegen.build`): verified by its
@@ -324,13 +340,13 @@ def cached_c_navigator(spec: NavigatorSpec, echo=lambda message: None,
     from modelgen.codegen.build import cached_library, store_library
 
     folder = cache_folder()
-    key = navigator_key(spec.model_file, rest_max)
+    key = navigator_key(spec.model_file, rest_max, window_max)
     payload = cached_library(folder, key)
     if payload is not None:
-        return _load_payload(payload, spec, rest_max), True
+        return _load_payload(payload, spec, rest_max, window_max), True
     echo(f"  generating and compiling the C navigator (once; cached in {folder})")
     with tempfile.TemporaryDirectory(prefix="modelgen-navigator-build-") as build:
-        navigator = build_c_navigator(spec, Path(build) / "navigator", rest_max)
+        navigator = build_c_navigator(spec, Path(build) / "navigator", rest_max, window_max)
         library = Path(build) / "navigator" / f"lib{navigator.model}_navigator.so"
         try:
             folder.mkdir(parents=True, exist_ok=True)
@@ -369,6 +385,7 @@ class LogArrays:
     gnss: np.ndarray  # (epochs, 13)
     windows: list[tuple[float, float]]
     rest_max: int = REST_MAX  # the alignment ring this log and configuration need (:func:`rest_capacity`)
+    window_max: int = WINDOW_MAX  # the detector window buffer they need (:func:`window_capacity`)
     #: the enabled aiding sensors' log samples, merged in time order: time [s], slot (NAV_N_AID order), value [SI]
     aid_time: np.ndarray = field(default_factory=lambda: np.zeros(0))
     aid_slot: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
@@ -391,7 +408,8 @@ def log_arrays(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec) -> 
     aid_time, aid_slot, aid_value = aiding_samples(inputs, values)
     return LogArrays(values, len(spec.free_parameters), time_, force, rate,
                      contiguous(g.time[epochs]), contiguous(target), contiguous((~outage[epochs]).astype(np.int32)),
-                     contiguous(gnss), windows, rest_capacity(config, time_), aid_time, aid_slot, aid_value)
+                     contiguous(gnss), windows, rest_capacity(config, time_), window_capacity(config, time_),
+                     aid_time, aid_slot, aid_value)
 
 
 def aiding_samples(inputs: Inputs, values: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -419,19 +437,20 @@ def alignment_error(config: NavigatorConfig, inputs: Inputs, status: int) -> Mod
     return ModelError(f"C navigator: a filter step failed (status {status})")
 
 
-def configuration_error(config: NavigatorConfig, field_values: dict, status: int, rest_max: int) -> ModelError:
+def configuration_error(config: NavigatorConfig, field_values: dict, status: int, rest_max: int,
+                        window_max: int = WINDOW_MAX) -> ModelError:
     """The error for a configuration the C navigator refused (its NAV_ERR_CONFIG_* status): the field's key and line,
     its value and bounds (:func:`modelgen.navigator.cconfig.refusal`)."""
     item = cconfig.CONFIG_STATUS.get(status)
     if item is None:
         return ModelError(f"{config.path}: the C navigator refused its configuration with status {status}, "
                           "which names no configuration field (a navigator built by another modelgen?)")
-    return cconfig.refusal(config.path, item, field_values[item.name], capacities(rest_max), "C", status)
+    return cconfig.refusal(config.path, item, field_values[item.name], capacities(rest_max, window_max), "C", status)
 
 
-def capacities(rest_max: int = REST_MAX) -> dict[str, int]:
+def capacities(rest_max: int = REST_MAX, window_max: int = WINDOW_MAX) -> dict[str, int]:
     """The C navigator's capacities that bound configuration fields (cconfig.Field maximum / minimum names)."""
-    return {"WINDOW_MAX": cconfig.WINDOW_MAX, "REST_MAX": rest_max}
+    return {"WINDOW_MAX": window_max, "REST_MAX": rest_max}
 
 
 def not_aligned_error(config: NavigatorConfig, inputs: Inputs) -> ModelError:
@@ -557,11 +576,15 @@ def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator, record
     if a.rest_max > navigator.rest_max:
         raise ModelError(f"{config.path}: this configuration's rest window needs an alignment ring of {a.rest_max} IMU "
                          f"samples; the C navigator was built with {navigator.rest_max} (cached_c_navigator(rest_max=))")
+    if a.window_max > navigator.window_max:
+        raise ModelError(f"{config.path}: this configuration's zero-velocity window needs a detector buffer of "
+                         f"{a.window_max} IMU samples; the C navigator was built with {navigator.window_max} "
+                         "(cached_c_navigator(window_max=))")
     state = ctypes.create_string_buffer(navigator.size)
     struct = cconfig.to_structure(a.cfg, a.n_parameters)
     status = navigator.configure(state, ctypes.byref(struct))
     if status:
-        raise configuration_error(config, a.cfg, status, navigator.rest_max)
+        raise configuration_error(config, a.cfg, status, navigator.rest_max, navigator.window_max)
     buffers = counts = None
     if record:
         buffers = RecordBuffers.sized(a, navigator.spec.n_states, n_carried=len(navigator.spec.carried))

@@ -259,11 +259,12 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
 
     values = cconfig.values(config, spec, max(WINDOW_SAMPLES_MIN, int(round(config.zupt_window / median_dt))), step,
                             still_window_samples(config, time), table)
-    # the C navigator's own configuration check (cconfig.bounds), so that both refuse the same configurations; the
-    # alignment ring's capacity is the C's alone (its ring is sized from the configuration: cnav.rest_capacity)
-    refused = cconfig.check(values, {"WINDOW_MAX": cconfig.WINDOW_MAX})
+    # the C navigator's own configuration check (cconfig.bounds), so that both refuse the same configurations; its
+    # buffers' capacities are the C's alone (the alignment ring and the detector window are sized from the
+    # configuration and the log: cnav.rest_capacity, cnav.window_capacity), so they bound nothing here
+    refused = cconfig.check(values, {})
     if refused is not None:
-        raise cconfig.refusal(config.path, refused, values[refused.name], {"WINDOW_MAX": cconfig.WINDOW_MAX}, "Python")
+        raise cconfig.refusal(config.path, refused, values[refused.name], {}, "Python")
     cfg = cconfig.namespace(values)
     speed0 = float(np.hypot(g.velocity[j0, 0], g.velocity[j0, 1]))
     sv = float(np.hypot(g.sigma_velocity[j0, 0], g.sigma_velocity[j0, 1]))

@@ -187,20 +187,33 @@ def test_the_header_names_every_status_and_the_check(tmp_path):
 
 
 @pytest.mark.compile
-def test_replay_names_the_key_and_line_a_navigator_refuses(tmp_path):
-    """A ZUPT window of 3 s at 100 Hz (300 samples) passes the loader but not the C's 256-sample buffer: the C and
-    the Python navigator refuse it alike, as one 'modelgen: error: FILE:LINE: ...' line and exit 2."""
-    from tests.cli_in_process import run_modelgen
+def test_a_zupt_window_beyond_the_default_buffer_flies_in_c_and_python_alike(tmp_path):
+    """A ZUPT window of 3 s at 100 Hz (300 samples, beyond the default 256-sample detector buffer) passes the loader,
+    and both navigators fly it: the C is built with the detector buffer the configuration needs (512), not refused
+    by a fixed one, and agrees with the Python navigator."""
+    from modelgen.navigator.config import load_config
+    from modelgen.navigator.cnav import WINDOW_MAX, window_capacity
+    from modelgen.navigator.replay import run_replay
+    from tests.navigator.test_navigator import _excerpt_inputs
 
     path = _with_key(tmp_path, "zupt.window_s", 3.0)
-    line = next(i for i, text in enumerate(path.read_text().splitlines(), start=1) if "window_s: 3.0" in text)
-    item = next(f for f in cconfig.FIELDS if f.name == "zupt_window")
-    for navigator, code in (("c", f" (status {cconfig.status_name(item)} = {cconfig.status_of(item)})"), ("python", "")):
-        result = run_modelgen(["replay", path, "--out", tmp_path / navigator, "--no-figures", "--navigator", navigator],
-                              tmp_path, timeout=600)
-        assert result.returncode == 2, result.stderr
-        errors = [x for x in result.stderr.splitlines() if x.startswith("modelgen: error:")]
-        assert errors == [f"modelgen: error: {path}:{line}: zupt.window_s: the {navigator.upper() if navigator == 'c' else 'Python'} "
-                          f"navigator refuses its configuration field zupt_window = 300{code}: it must be >= 2 and "
-                          f"<= 256 (the C navigator's WINDOW_MAX)"], result.stderr
-        assert "Traceback" not in result.stderr
+    assert window_capacity(load_config(path), _excerpt_inputs()[1].time) == 512 > WINDOW_MAX
+    result = run_replay(path, None, echo=lambda _: None, navigator="both")
+    assert result.summary["navigator"] == "c"
+    assert result.summary["c_python_max_difference_m"] <= 1e-3
+
+
+@pytest.mark.compile
+def test_a_c_navigator_built_with_a_smaller_detector_buffer_refuses_the_configuration_before_flying(tmp_path):
+    """The same 300-sample window given to a C navigator built with the default buffer: one error naming the
+    buffer the configuration needs and the one it was built with, before anything is flown."""
+    from modelgen.navigator.config import load_config
+    from modelgen.navigator.cnav import WINDOW_MAX, cached_c_navigator, fly_c
+    from tests.navigator.test_navigator import _excerpt_inputs, _excerpt_spec
+
+    config = load_config(_with_key(tmp_path, "zupt.window_s", 3.0))
+    navigator, _ = cached_c_navigator(_excerpt_spec())
+    assert navigator.window_max == WINDOW_MAX
+    with pytest.raises(ModelError, match=r"zero-velocity window needs a detector buffer of 512 IMU samples; the C "
+                                         r"navigator was built with 256"):
+        fly_c(config, _excerpt_inputs()[1], navigator)
