@@ -777,7 +777,7 @@ def simulate_flight(scenario, folder: Path, runs: int, seed: int, implementation
     with it flies only the missing ones.
     """
     from modelgen.cluster import dask_client, describe_client
-    from modelgen.simulation.flight_report import simulate, start_flight
+    from modelgen.simulation.flight_report import check_monte_carlo_journal, simulate, start_flight
     from modelgen.simulation.model_process import ModelProcess
 
     # the generated C filter needs only plain data of the derived model: the model is derived, its code generated
@@ -786,6 +786,7 @@ def simulate_flight(scenario, folder: Path, runs: int, seed: int, implementation
     preparing = ModelProcess.start(scenario, implementation, runs) if implementation == "c" else None
     started = start_flight(scenario, seed)  # the truth and IMU errors are made while the model is derived
     derived = preparing.result() if preparing is not None else load_and_derive(scenario.filter.model)
+    check_monte_carlo_journal(journal, scenario, derived, runs, seed, implementation, started)  # before a cluster is opened
     if runs < 2 and scheduler is None:
         return simulate(scenario, derived, folder, runs=runs, seed=seed, echo=echo, implementation=implementation,
                         history_csv=history_csv, journal=journal, started=started)
