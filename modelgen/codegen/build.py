@@ -478,10 +478,13 @@ def build_c_filter(
     same code, compiler and flags compiled cleanly before compile cleanly now.
     """
     if build_dir is not None:
-        library = compile_shared_library([Path(folder) / f"{model}.c"], Path(build_dir) / f"lib{model}.so", extra_flags,
-                                         cache=True)
+        library = compile_c_library(folder, model, Path(build_dir), extra_flags)
         return CompiledFilter(library, model, sizes, parameter_names, options=options)
     with tempfile.TemporaryDirectory(prefix="modelgen-build-") as temporary:
-        library = compile_shared_library([Path(folder) / f"{model}.c"], Path(temporary) / f"lib{model}.so", extra_flags,
-                                         cache=True)
+        library = compile_c_library(folder, model, Path(temporary), extra_flags)
         return CompiledFilter(library, model, sizes, parameter_names, options=options)
+
+
+def compile_c_library(folder: Path, model: str, build_dir: Path, extra_flags: tuple[str, ...] = ("-O2",)) -> Path:
+    """``folder/<model>.c`` compiled strictly into ``build_dir/lib<model>.so``, through the compile cache."""
+    return compile_shared_library([Path(folder) / f"{model}.c"], Path(build_dir) / f"lib{model}.so", extra_flags, cache=True)
