@@ -372,12 +372,13 @@ class Journal:
             return {}
         return self._read(repair=True)
 
-    def check(self) -> None:
+    def check(self) -> int:
         """Refuse now, as :meth:`completed` would, a journal of another study or with an entry that is not this
         study's, before any work: nothing is written (an absent journal passes; a last line cut short is left
-        for :meth:`completed` to drop)."""
+        for :meth:`completed` to drop).  Returns how many tasks it holds."""
         if self.path.exists() and self.path.stat().st_size > 0:
-            self._read(repair=False)
+            return len(self._read(repair=False))
+        return 0
 
     def _read(self, repair: bool) -> dict[int, Any]:
         """The recorded results; ModelError, naming the line, for anything not of this study.  ``repair``: drop

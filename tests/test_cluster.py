@@ -341,13 +341,15 @@ def test_modelgen_simulate_journal_keeps_the_runs_and_refuses_another_study(tmp_
     assert first.returncode == 0, first.stderr
     kept = journal.read_text()
     assert len(kept.splitlines()) == 3  # the study's header and both runs
+    assert "Monte Carlo on local cluster" in first.stderr  # the progress lines
     again = simulate()
     assert again.returncode == 0, again.stderr
     assert journal.read_text() == kept  # nothing flown again, nothing appended
+    assert "Monte Carlo on" not in again.stderr  # every run held: no cluster started for none to fly
     other = simulate("--seed", "1")
     assert other.returncode == 2
     assert "runs.jsonl:1: journal of another study or task split" in other.stderr
-    assert other.stdout == ""  # refused before anything was flown or a cluster opened
+    assert "modelgen simulate:" not in other.stderr and "Monte Carlo on" not in other.stderr  # refused before anything was flown or a cluster opened
     assert journal.read_text() == kept
 
 

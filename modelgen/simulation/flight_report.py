@@ -222,19 +222,21 @@ def monte_carlo_seed(seed: int) -> int:
 
 
 def check_monte_carlo_journal(journal: str | Path | None, profile: FlightProfile, derived: Any, runs: int, seed: int,
-                              implementation: str, started: FlightStart | None = None) -> None:
+                              implementation: str, started: FlightStart | None = None) -> bool:
     """Refuse a journal of another study before anything is flown (``derived``: as :func:`simulation_report` takes it);
-    the figure process of ``started``, the flight begun, is closed then."""
+    the figure process of ``started``, the flight begun, is closed then.  True when the journal holds every run
+    (none is flown: no cluster is needed)."""
     if journal is None or runs < 1:
-        return
+        return False
     prepared = derived if isinstance(derived, PreparedModel) else None
     try:
-        check_journal(journal, profile, None if prepared else derived, runs, monte_carlo_seed(seed), implementation,
-                      setup=prepared.monte_carlo if prepared else None)
+        held = check_journal(journal, profile, None if prepared else derived, runs, monte_carlo_seed(seed), implementation,
+                             setup=prepared.monte_carlo if prepared else None)
     except ModelError:
         if started is not None and started.figures is not None:
             started.figures.close()
         raise
+    return held == runs
 
 
 def simulate(*args: Any, **kwargs: Any) -> Path:
