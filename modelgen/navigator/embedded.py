@@ -114,7 +114,13 @@ def embedded_replay(spec: NavigatorSpec, arrays: LogArrays, reference: np.ndarra
     missing = toolchain.missing_tools(toolchain.ARM_EMBEDDED_CC, toolchain.ARM_LINUX_CC, toolchain.QEMU_ARM)
     if missing:
         raise ModelError(f"embedded replay needs {', '.join(missing)}")
+    from modelgen.navigator.cnav import capacities
     from modelgen.navigator.mechanization import radii
+
+    refused = cconfig.check(arrays.cfg, capacities(arrays.rest_max))  # the C's own check, before a build
+    if refused is not None:
+        raise ModelError(f"embedded replay: the C navigator refuses its configuration field {refused.name} = "
+                         f"{arrays.cfg[refused.name]!r}: it must be {cconfig.describe(refused, capacities(arrays.rest_max))}")
 
     with tempfile.TemporaryDirectory(prefix="modelgen-nav-arm-") as work:
         folder, build = Path(work) / "src", Path(work) / "m4"
