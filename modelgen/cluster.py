@@ -370,6 +370,19 @@ class Journal:
         if not self.path.exists() or self.path.stat().st_size == 0:
             self._append({"study": self.study, "tasks": self.tasks})
             return {}
+        return self._read(repair=True)
+
+    def check(self) -> int:
+        """Refuse now, as :meth:`completed` would, a journal of another study or with an entry that is not this
+        study's, before any work: nothing is written (an absent journal passes; a last line cut short is left
+        for :meth:`completed` to drop).  Returns how many tasks it holds."""
+        if self.path.exists() and self.path.stat().st_size > 0:
+            return len(self._read(repair=False))
+        return 0
+
+    def _read(self, repair: bool) -> dict[int, Any]:
+        """The recorded results; ModelError, naming the line, for anything not of this study.  ``repair``: drop
+        a last line cut short (by the stop that ended the study) from the file, else only leave it out."""
         lines = self.path.read_text(encoding="utf-8").splitlines()
         try:
             header = json.loads(lines[0])
@@ -388,8 +401,9 @@ class Journal:
                 index = entry["index"]
             except (json.JSONDecodeError, KeyError, TypeError):
                 if number == len(lines):  # cut short by the stop that ended the study: drop it
-                    good = "".join(f"{kept}\n" for kept in lines[:-1])
-                    os.truncate(self.path, len(good.encode("utf-8")))
+                    if repair:
+                        good = "".join(f"{kept}\n" for kept in lines[:-1])
+                        os.truncate(self.path, len(good.encode("utf-8")))
                     break
                 raise ModelError(f"{self.path}:{number}: not a journal entry") from None
             if not isinstance(index, int) or not 0 <= index < self.tasks:

@@ -774,10 +774,11 @@ def simulate_flight(scenario, folder: Path, runs: int, seed: int, implementation
     for two runs or more, to a local cluster of ``workers`` processes (default:
     one per core), opened first so that an unreachable address fails at once.
     ``journal`` keeps the completed runs on disk; a rerun of the same study
-    with it flies only the missing ones.
+    with it flies only the missing ones (and opens no local cluster when none
+    is missing); a journal of another study is refused before anything is flown.
     """
     from modelgen.cluster import dask_client, describe_client
-    from modelgen.simulation.flight_report import simulate, start_flight
+    from modelgen.simulation.flight_report import check_monte_carlo_journal, simulate, start_flight
     from modelgen.simulation.model_process import ModelProcess
 
     # the generated C filter needs only plain data of the derived model: the model is derived, its code generated
@@ -786,7 +787,9 @@ def simulate_flight(scenario, folder: Path, runs: int, seed: int, implementation
     preparing = ModelProcess.start(scenario, implementation, runs) if implementation == "c" else None
     started = start_flight(scenario, seed)  # the truth and IMU errors are made while the model is derived
     derived = preparing.result() if preparing is not None else load_and_derive(scenario.filter.model)
-    if runs < 2 and scheduler is None:
+    # a journal of another study is refused before a cluster is opened; one holding every run needs none
+    complete = check_monte_carlo_journal(journal, scenario, derived, runs, seed, implementation, started)
+    if (runs < 2 or complete) and scheduler is None:
         return simulate(scenario, derived, folder, runs=runs, seed=seed, echo=echo, implementation=implementation,
                         history_csv=history_csv, journal=journal, started=started)
     with dask_client(scheduler, workers) as client:

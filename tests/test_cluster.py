@@ -310,6 +310,24 @@ def test_a_journal_of_another_study_is_refused(tmp_path):
         run_tasks(abs, [(-1,), (-2,)], journal=Journal(path, "study-a", 2))
 
 
+def test_a_journal_is_checked_before_any_work_without_writing_to_it(tmp_path):
+    path = tmp_path / "study.jsonl"
+    Journal(path, "study-a", 2).check()  # absent: passes, and is not started
+    assert not path.exists()
+    run_tasks(abs, [(-1,), (-2,)], journal=Journal(path, "study-a", 2))
+    kept = path.read_text()
+    Journal(path, "study-a", 2).check()
+    with pytest.raises(ModelError, match="study.jsonl:1: journal of another study"):
+        Journal(path, "study-b", 2).check()
+    with path.open("a") as handle:
+        handle.write('{"index": 1, "res')  # a last line cut short: left for completed() to drop
+    Journal(path, "study-a", 2).check()
+    assert path.read_text() == kept + '{"index": 1, "res'
+    path.write_text('{"study": "study-a", "tasks": 2}\n{"index": 7, "result": 2}\n')
+    with pytest.raises(ModelError, match="task index 7 out of range"):
+        Journal(path, "study-a", 2).check()
+
+
 def test_modelgen_simulate_journal_keeps_the_runs_and_refuses_another_study(tmp_path):
     journal = tmp_path / "runs.jsonl"
 
@@ -323,12 +341,15 @@ def test_modelgen_simulate_journal_keeps_the_runs_and_refuses_another_study(tmp_
     assert first.returncode == 0, first.stderr
     kept = journal.read_text()
     assert len(kept.splitlines()) == 3  # the study's header and both runs
+    assert "Monte Carlo on local cluster" in first.stderr  # the progress lines
     again = simulate()
     assert again.returncode == 0, again.stderr
     assert journal.read_text() == kept  # nothing flown again, nothing appended
+    assert "Monte Carlo on" not in again.stderr  # every run held: no cluster started for none to fly
     other = simulate("--seed", "1")
     assert other.returncode == 2
     assert "runs.jsonl:1: journal of another study or task split" in other.stderr
+    assert "modelgen simulate:" not in other.stderr and "Monte Carlo on" not in other.stderr  # refused before anything was flown or a cluster opened
     assert journal.read_text() == kept
 
 

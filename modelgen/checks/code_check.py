@@ -23,6 +23,7 @@ much the run's own arithmetic cancels: see :func:`step_conditioning`.
 from __future__ import annotations
 
 import warnings
+from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Mapping
@@ -249,16 +250,23 @@ def check_generated(
     _check_ud_variances(derived, scenario, options)
     folder = Path(folder)
     runs = {}
-    for backend in backends():
-        try:
-            runs[backend.name] = backend.run(folder, derived, scenario, options, _build_folder(build_dir, backend.name))
-        except BackendUnavailable as missing:  # its toolchain is not installed here: said, not failed
-            warnings.warn(str(missing), stacklevel=2)
-        except ValueError as error:  # the generated Python refused an input of the scenario (its contract)
-            if backend.name != "python":  # the compiled backends refuse with a status (ModelError): a bug
-                raise
-            raise ModelError(f"{_located(scenario)}the check scenario ({scenario.label}) is refused by the generated "
-                             f"{backend.name}: {error}") from None
+    with ThreadPoolExecutor(1, thread_name_prefix="modelgen-build-ahead") as ahead:
+        # a compiled backend's build (a compiler process) goes ahead in another thread while the backends before it
+        # run here (the Python's first call compiles its numba kernel); its run then takes it from the compile cache
+        building = {b.name: ahead.submit(b.prepare, folder, derived, options, _build_folder(build_dir, b.name))
+                    for b in backends() if b.preparer is not None and build_dir is not None}
+        for backend in backends():
+            if backend.name in building:
+                wait([building[backend.name]])  # a build that failed ahead fails again, and is reported, in run
+            try:
+                runs[backend.name] = backend.run(folder, derived, scenario, options, _build_folder(build_dir, backend.name))
+            except BackendUnavailable as missing:  # its toolchain is not installed here: said, not failed
+                warnings.warn(str(missing), stacklevel=2)
+            except ValueError as error:  # the generated Python refused an input of the scenario (its contract)
+                if backend.name != "python":  # the compiled backends refuse with a status (ModelError): a bug
+                    raise
+                raise ModelError(f"{_located(scenario)}the check scenario ({scenario.label}) is refused by the generated "
+                                 f"{backend.name}: {error}") from None
     ref = reference_run(derived, scenario, options.taylor_order, options.taylor_tolerance, options.process_noise)
     tol = scenario_tolerance(derived, scenario, options.taylor_order)
     initial_variance = np.diag(scenario.initial_covariance)

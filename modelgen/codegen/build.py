@@ -89,7 +89,7 @@ def compile_shared_library(c_files: list[Path], output: Path, extra_flags: tuple
         cc, strict = compiler(), STRICT_FLAGS
     flags = [*strict, *extra_flags, "-fPIC", "-shared"]
     headers = ("*.h", "*.hpp") if language == "c++" else ("*.h",)
-    key = library_key(c_files, [*flags, "-lm"], compiler_identity(cc), headers) if cache else None
+    key = library_key(c_files, [*flags, "-lm"], compiler_identity(cc), headers, build=Path(output).parent) if cache else None
     if key is not None:
         payload = cached_library(library_cache_folder(), key)
         if payload is not None:
@@ -144,18 +144,50 @@ def _identity(path: str, modified: int) -> str:
     return f"{path}\n{result.returncode}\n{result.stdout}"
 
 
-def library_key(c_files: list[Path], flags: list[str], identity: str, header_patterns: tuple[str, ...] = ("*.h",)) -> str:
-    """Digest of what a compile reads or is told: sources, the headers beside them, flags, compiler."""
+def library_key(c_files: list[Path], flags: list[str], identity: str, header_patterns: tuple[str, ...] = ("*.h",),
+                build: Path | None = None) -> str:
+    """Digest of what a compile reads or is told: sources, the headers beside them, flags, compiler.
+
+    ``build`` is the folder the library is built in (a temporary one, as a
+    check's): a ``-L`` flag naming it is ``-L<build>`` in the key, so that
+    the same compile in another folder is the same entry; each library a
+    ``-l:NAME`` flag links from a ``-L`` folder is keyed by its content
+    (read here), not by where it lies.
+    """
     folders = sorted({Path(f).resolve().parent for f in c_files})
     headers = sorted(h for folder in folders for pattern in header_patterns for h in folder.glob(pattern))
+    linked = _linked_libraries(flags)
+    if build is not None:
+        flags = [_normalized_flag(flag, Path(build)) for flag in flags]
     digest = hashlib.sha256(ENTRY_MAGIC)
     digest.update(json.dumps({"compiler": identity, "flags": flags,
                               "sources": [Path(f).name for f in c_files]}).encode("utf-8"))
-    for path in [*map(Path, c_files), *headers]:
+    for path in [*map(Path, c_files), *headers, *linked]:
         content = path.read_bytes()
         digest.update(f"\n{path.name} {len(content)}\n".encode("utf-8"))
         digest.update(content)
     return digest.hexdigest()
+
+
+def _normalized_flag(flag: str, build: Path) -> str:
+    """``-L<build>`` for a ``-L`` flag naming the build folder, else ``flag`` as it is.
+
+    Only a search folder of the linker is normalized: it is not written into
+    the library (an ``-rpath`` or ``-I`` folder may be, and stays in the key).
+    """
+    if flag.startswith("-L") and len(flag) > 2 and os.path.realpath(flag[2:]) == os.path.realpath(build):
+        return "-L<build>"
+    return flag
+
+
+def _linked_libraries(flags: list[str]) -> list[Path]:
+    """The files of the ``-l:NAME`` flags, found in the ``-L`` folders (in order, as the linker searches them)."""
+    folders = [Path(flag[2:]) for flag in flags if flag.startswith("-L") and len(flag) > 2]
+    found = []
+    for flag in flags:
+        if flag.startswith("-l:"):
+            found += [folder / flag[3:] for folder in folders if (folder / flag[3:]).is_file()][:1]
+    return found
 
 
 def _entry_paths(folder: Path, key: str) -> list[Path]:
@@ -446,10 +478,13 @@ def build_c_filter(
     same code, compiler and flags compiled cleanly before compile cleanly now.
     """
     if build_dir is not None:
-        library = compile_shared_library([Path(folder) / f"{model}.c"], Path(build_dir) / f"lib{model}.so", extra_flags,
-                                         cache=True)
+        library = compile_c_library(folder, model, Path(build_dir), extra_flags)
         return CompiledFilter(library, model, sizes, parameter_names, options=options)
     with tempfile.TemporaryDirectory(prefix="modelgen-build-") as temporary:
-        library = compile_shared_library([Path(folder) / f"{model}.c"], Path(temporary) / f"lib{model}.so", extra_flags,
-                                         cache=True)
+        library = compile_c_library(folder, model, Path(temporary), extra_flags)
         return CompiledFilter(library, model, sizes, parameter_names, options=options)
+
+
+def compile_c_library(folder: Path, model: str, build_dir: Path, extra_flags: tuple[str, ...] = ("-O2",)) -> Path:
+    """``folder/<model>.c`` compiled strictly into ``build_dir/lib<model>.so``, through the compile cache."""
+    return compile_shared_library([Path(folder) / f"{model}.c"], Path(build_dir) / f"lib{model}.so", extra_flags, cache=True)

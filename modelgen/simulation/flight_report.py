@@ -54,7 +54,7 @@ from modelgen.simulation.flight_summary import figure_captions, summary_markdown
 from modelgen.simulation.history import CsvHistory
 from modelgen.simulation.jit import HAVE_NUMBA
 from modelgen.simulation.model_process import PreparedModel
-from modelgen.simulation.montecarlo import run_monte_carlo
+from modelgen.simulation.montecarlo import check_journal, run_monte_carlo
 from modelgen.simulation.scenario import FlightProfile
 from modelgen.simulation.streaming import flies_compiled_loop, fly_modes, history_every
 
@@ -112,6 +112,7 @@ def simulation_report(profile: FlightProfile, derived: "DerivedModel | PreparedM
     ``started``: this flight's truth and IMU errors, already being made (:func:`start_flight` with this
     profile object and seed); they are started here otherwise.
     """
+    check_monte_carlo_journal(journal, profile, derived, runs, seed, implementation, started)  # before anything is flown
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     timings: dict[str, float] = {}
@@ -182,7 +183,7 @@ def simulation_report(profile: FlightProfile, derived: "DerivedModel | PreparedM
     monte_carlo = None
     if runs > 0:
         t = time.perf_counter()
-        monte_carlo = run_monte_carlo(profile, flown, runs, seed=seed + 1, workers=workers, client=client,
+        monte_carlo = run_monte_carlo(profile, flown, runs, seed=monte_carlo_seed(seed), workers=workers, client=client,
                                       progress=_echo_progress(echo, "Monte Carlo runs"), implementation=implementation,
                                       journal=journal, setup=prepared.monte_carlo if prepared is not None else None)
         timings[f"Monte Carlo ({runs_text(runs)}, {monte_carlo.where})"] = time.perf_counter() - t
@@ -213,6 +214,29 @@ def simulation_report(profile: FlightProfile, derived: "DerivedModel | PreparedM
     echo(f"  wrote {summary} and {len(figures)} figures")
     captions = figure_captions(profile, trajectory, results, monte_carlo, units)
     return FlightReport(summary, {path: captions.get(path.name, path.stem) for path in figures}, targets(monte_carlo))
+
+
+def monte_carlo_seed(seed: int) -> int:
+    """The seed of a flight's Monte Carlo runs: not the single flight's own (``seed``)."""
+    return seed + 1
+
+
+def check_monte_carlo_journal(journal: str | Path | None, profile: FlightProfile, derived: Any, runs: int, seed: int,
+                              implementation: str, started: FlightStart | None = None) -> bool:
+    """Refuse a journal of another study before anything is flown (``derived``: as :func:`simulation_report` takes it);
+    the figure process of ``started``, the flight begun, is closed then.  True when the journal holds every run
+    (none is flown: no cluster is needed)."""
+    if journal is None or runs < 1:
+        return False
+    prepared = derived if isinstance(derived, PreparedModel) else None
+    try:
+        held = check_journal(journal, profile, None if prepared else derived, runs, monte_carlo_seed(seed), implementation,
+                             setup=prepared.monte_carlo if prepared else None)
+    except ModelError:
+        if started is not None and started.figures is not None:
+            started.figures.close()
+        raise
+    return held == runs
 
 
 def simulate(*args: Any, **kwargs: Any) -> Path:

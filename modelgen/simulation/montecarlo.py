@@ -372,20 +372,16 @@ def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, se
                          f"(choose from {', '.join(IMPLEMENTATIONS)})")
     mode = mode or profile.filter.mode
     store_every = store_every or default_store_every(profile)
-    if setup is not None and (setup.mode, setup.store_every, setup.implementation) != (mode, store_every, implementation):
-        raise ModelError(f"Monte Carlo: the set-up {setup.key} is for mode {setup.mode!r}, every {setup.store_every} "
-                         f"cycles, filter {setup.implementation!r}, not {mode!r}, {store_every}, {implementation!r}")
-    key = setup.key if setup is not None else setup_key(profile, truth_profile, derived.model, mode, store_every,
-                                                         implementation)
-    if client is None and workers > 1 and runs > 1:
+    key = study_key(profile, derived, mode, store_every, implementation, truth_profile, setup)
+    kept = run_journal(journal, key, seed, runs) if journal is not None else None
+    finished = kept is not None and len(kept.completed()) == runs  # all in the journal: nothing to build or ship
+    if client is None and workers > 1 and runs > 1 and not finished:  # (and no local cluster to start)
         with dask_client(workers=min(workers, runs)) as local:
             return run_monte_carlo(profile, derived, runs, seed, mode, client=local, store_every=store_every,
                                    progress=progress, truth_profile=truth_profile, implementation=implementation,
                                    on_run=on_run, journal=journal, setup=setup)
-    kept = run_journal(journal, key, seed, runs) if journal is not None else None
     seeds = np.random.SeedSequence(seed).spawn(runs)
     start = time.perf_counter()
-    finished = kept is not None and len(kept.completed()) == runs  # all in the journal: nothing to build or ship
     shared: Any
     if client is not None and not finished:
         # first: fresh workers import (and warm up) side by side while the set-up is made here
@@ -427,6 +423,28 @@ def run_monte_carlo(profile: FlightProfile, derived: DerivedModel, runs: int, se
         seconds=time.perf_counter() - start,
         where=describe_client(client),
     )
+
+
+def study_key(profile: FlightProfile, derived: DerivedModel | ModelOutline | None, mode: str, store_every: int,
+              implementation: str, truth_profile: FlightProfile | None = None, setup: MonteCarloSetup | None = None) -> str:
+    """The set-up digest of a study (:func:`setup_key`): ``setup``'s own when given (it must be for this mode, cycle
+    count and filter), else that of ``derived``'s model."""
+    if setup is not None:
+        if (setup.mode, setup.store_every, setup.implementation) != (mode, store_every, implementation):
+            raise ModelError(f"Monte Carlo: the set-up {setup.key} is for mode {setup.mode!r}, every {setup.store_every} "
+                             f"cycles, filter {setup.implementation!r}, not {mode!r}, {store_every}, {implementation!r}")
+        return setup.key
+    return setup_key(profile, truth_profile, derived.model, mode, store_every, implementation)
+
+
+def check_journal(journal: str | Path, profile: FlightProfile, derived: DerivedModel | ModelOutline | None, runs: int,
+                  seed: int = 0, implementation: str = "reference", setup: MonteCarloSetup | None = None) -> int:
+    """Refuse now a journal that :func:`run_monte_carlo` (same arguments, default mode and cycle count) would refuse,
+    before a flight or a cluster is started (:meth:`modelgen.cluster.Journal.check`; nothing is written); how many
+    of the runs it holds."""
+    mode, store_every = profile.filter.mode, default_store_every(profile)
+    return run_journal(journal, study_key(profile, derived, mode, store_every, implementation, setup=setup), seed,
+                       runs).check()
 
 
 def run_journal(path: str | Path, key: str, seed: int, runs: int) -> Journal:

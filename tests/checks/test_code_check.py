@@ -171,3 +171,45 @@ def test_positive_definiteness_is_judged_on_the_correlation_matrix():
     P = np.diag([1e-14, 1e6])
     assert is_positive_definite(P)
     assert not is_positive_definite(np.array([[1.0, 2.0], [2.0, 1.0]]))
+
+
+TOY_LOOP = """\
+model: toy_loop
+parameters:
+  - {name: rate, symbol: k, value: 0.5}
+  - {name: sigma, symbol: s, value: 0.1}
+states:
+  - {name: x_state, symbol: x}
+noises:
+  - {name: w_noise, symbol: w, psd: "s**2"}
+dynamics:
+  x: -k*x + w
+measurements:
+  - {name: z_meas, symbol: z, expression: x, variance: "s**2"}
+"""
+
+
+@pytest.mark.compile
+def test_the_c_built_ahead_while_the_python_runs_is_compiled_once_and_a_failed_build_is_reported(tmp_path, monkeypatch):
+    """check_generated compiles the C in another thread (Backend.prepare) while the Python runs; the C's run (and
+    the C++ driver's link) take that library from the compile cache: one compile of the C, not two; a C that does
+    not compile fails the check with the compiler's message, as without the build ahead."""
+    from modelgen.codegen.build import CACHE_ENV
+    from modelgen.errors import ModelError
+    from modelgen.jobs import check
+    from tests.codegen.compile_cache_support import counting_compiler
+
+    script, compiles = counting_compiler(tmp_path)
+    monkeypatch.setenv("CC", str(script))
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "cache"))
+    (tmp_path / "toy.yaml").write_text(TOY_LOOP)
+    derived = derive(load_model(tmp_path / "toy.yaml"))
+    folder = tmp_path / "toy_loop"
+    write_atomically(folder, generate_code(derived).files)
+    results = check(derived, folder)
+    assert {r.implementation for r in results} >= {"python", "c"} and all(r.passed() for r in results)
+    assert compiles() == 1
+    source = folder / "toy_loop.c"
+    source.write_text(source.read_text() + "\nint toy_loop_unused(int x) { return 0; }\n")  # -Wextra -Werror: refused
+    with pytest.raises(ModelError, match="compiling .*toy_loop.c failed"):
+        check(derived, folder)

@@ -67,6 +67,33 @@ def test_other_flags_other_source_or_another_header_miss_the_cache(tmp_path, cou
     assert len(list(library_cache_folder().glob("*.lib"))) == 4
 
 
+USER = "int answer(void);\nint twice(void);\nint twice(void) { return 2 * answer(); }\n"
+
+
+def _linked_build(folder: Path, value: int) -> Path:
+    """libuser.so in ``folder``, linked against libdep.so beside it (answer() = ``value``), as the C++ driver links the C."""
+    compile_shared_library([_source(folder / "dep", value)], folder / "libdep.so")  # not cached: one compile each
+    user = folder / "user" / "user.c"
+    user.parent.mkdir()
+    user.write_text(USER)
+    flags = ("-O2", f"-L{folder}", "-Wl,--no-as-needed", "-l:libdep.so", "-Wl,-rpath,$ORIGIN")
+    return compile_shared_library([user], folder / "libuser.so", flags, cache=True)
+
+
+@pytest.mark.compile
+def test_a_library_linked_from_its_build_folder_is_keyed_by_the_linked_content_not_by_the_folder(tmp_path, counted_compiler):
+    first = _linked_build(tmp_path / "a", 42)
+    assert counted_compiler() == 2
+    again = _linked_build(tmp_path / "b", 42)  # another build folder (-L<folder>), the same library linked
+    assert counted_compiler() == 3  # only libdep.so was compiled: libuser.so was a hit
+    assert again.read_bytes() == first.read_bytes()
+    lib = ctypes.CDLL(str(again))
+    assert lib.twice() == 84
+    _linked_build(tmp_path / "c", 7)  # the same flags and source, another library at -l:libdep.so
+    assert counted_compiler() == 5  # a miss: libuser.so compiled again
+    assert len(list(library_cache_folder().glob("*.lib"))) == 2
+
+
 @pytest.mark.compile
 def test_a_corrupt_or_foreign_file_at_an_entry_is_left_alone_and_the_library_compiled_again(tmp_path, counted_compiler):
     compile_shared_library([_source(tmp_path / "a")], tmp_path / "a" / "lib.so", cache=True)

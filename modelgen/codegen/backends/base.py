@@ -50,6 +50,8 @@ Trajectory = list[tuple[np.ndarray, np.ndarray]]
 
 #: (folder of the generated files, derived model, scenario, the options they were generated with, a build folder or None)
 Runner = Callable[[Path, DerivedModel, Scenario, CodegenOptions, "Path | None"], Trajectory]
+#: (folder of the generated files, derived model, the options, the run's build folder): builds ahead what run builds
+Preparer = Callable[[Path, DerivedModel, CodegenOptions, Path], None]
 
 
 @functools.lru_cache(maxsize=None)
@@ -90,6 +92,7 @@ class Backend:
     verbatim: tuple[Path, ...] = ()  # files of the product copied byte for byte (the C runtime)
     runner: Runner | None = None  # flies a scenario through the built product (run)
     counter: Callable[[FilterDescription], dict[str, OperationCount]] | None = None  # its own operation counts (costs)
+    preparer: Preparer | None = None  # builds ahead, in another thread, through the compile cache (prepare)
 
     def run(self, folder: Path, derived: DerivedModel, scenario: Scenario, options: CodegenOptions | None = None,
             build_dir: Path | None = None) -> Trajectory:
@@ -103,6 +106,13 @@ class Backend:
         if self.runner is None:
             raise NotImplementedError(f"backend {self.name!r} cannot run a scenario")
         return self.runner(Path(folder), derived, scenario, options or CodegenOptions(), build_dir)
+
+    def prepare(self, folder: Path, derived: DerivedModel, options: CodegenOptions, build_dir: Path) -> None:
+        """Build now, through the compile cache, what :meth:`run` in ``build_dir`` will build (a compiler process:
+        another thread may run it while this one does other work); run then takes it from the cache.  Nothing
+        for a backend that builds nothing; a build that fails here fails again, and is reported, in run."""
+        if self.preparer is not None:
+            self.preparer(Path(folder), derived, options, Path(build_dir))
 
     def costs(self, description: FilterDescription) -> dict[str, OperationCount]:
         """The operation counts of this backend's own kernels (``predict (C)``), written into every file header."""

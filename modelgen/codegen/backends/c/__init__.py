@@ -16,7 +16,7 @@ from pathlib import Path
 from modelgen.codegen.backends.base import Backend
 from modelgen.codegen.backends.c.context import RUNTIME_FILES, c_context
 from modelgen.codegen.backends.c.printer import wrap_c
-from modelgen.codegen.backends.c.run import c_run
+from modelgen.codegen.backends.c.run import c_prepare, c_run
 from modelgen.codegen.description import FilterDescription
 from modelgen.codegen.kernels import OperationCount, thornton_cost
 
@@ -47,6 +47,7 @@ BACKEND = Backend(
     finish=finish,
     verbatim=RUNTIME_FILES,
     runner=c_run,
+    preparer=c_prepare,
     counter=c_costs,
     files=(
         ("{p}.h", "c_header.h.j2"),

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from modelgen.codegen.backends.base import Scenario, Trajectory, named_parameters
-from modelgen.codegen.build import build_c_filter
+from modelgen.codegen.build import build_c_filter, compile_c_library
 from modelgen.codegen.layout import ModelSizes
 from modelgen.codegen.options import CodegenOptions
 from modelgen.derivation.symbolic import DerivedModel
@@ -30,3 +30,8 @@ def c_run(folder: Path, derived: DerivedModel, scenario: Scenario, options: Code
                 raise ModelError(f"generated C update returned status {status}")
         out.append((filt.x, filt.P))
     return out
+
+
+def c_prepare(folder: Path, derived: DerivedModel, options: CodegenOptions, build_dir: Path) -> None:
+    """The library :func:`c_run` in ``build_dir`` loads, compiled ahead into the compile cache (Backend.prepare)."""
+    compile_c_library(folder, derived.model.name, build_dir)

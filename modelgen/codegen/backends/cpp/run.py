@@ -6,7 +6,9 @@ and runs predict and update over the scenario's measurements, returning x
 and P after every step.  It is linked against the C library of the same
 folder (compiled through the compile cache, as the C backend's run builds
 it) under a name carrying the library's digest, found beside it at load
-time ($ORIGIN): the class's arithmetic is that library's.  With Eigen
+time ($ORIGIN): the class's arithmetic is that library's.  The driver is
+compiled through the compile cache too (keyed on its source and headers,
+the flags with the build folder normalized and the C library's content).  With Eigen
 installed the driver reads x and P through the class's Eigen views.
 """
 
@@ -57,7 +59,9 @@ def build_driver(folder: Path, derived: DerivedModel, options: CodegenOptions, b
     template = environment(HERE / "templates", HERE / "harness").get_template("cpp_run_driver.cpp.j2")
     driver.write_text(template.render(cpp_context(describe_filter(derived, options))), encoding="utf-8")
     flags = ("-O1", *eigen_flags(), f"-L{build}", "-Wl,--no-as-needed", f"-l:{linked.name}", "-Wl,-rpath,$ORIGIN")
-    return compile_shared_library([driver], build / f"lib{name}_cpp_{digest}.so", flags, language="c++")
+    # the compile cache keys the driver on its source, the headers beside it, the flags with ``build`` as <build>
+    # and the content of the C library it links: a driver built in another (temporary) folder is a hit
+    return compile_shared_library([driver], build / f"lib{name}_cpp_{digest}.so", flags, cache=True, language="c++")
 
 
 def cpp_run(folder: Path, derived: DerivedModel, scenario: Scenario, options: CodegenOptions,
