@@ -479,7 +479,7 @@ def c_context(description: FilterDescription) -> dict[str, object]:
     unrolled = description.discretize_plan if description.discretize_unrolled else None
     compact_discretize = compact_discretize_context(structure) if not unrolled and not options.van_loan else None
     scaling = nominal_scaling(description.derived)  # D of ||F||_D fixed at generation time (None: balanced at run time)
-    balancing = scaling is None and any(i != j for i, j in structure.entries("F"))  # the template's run-time sweeps
+    balancing = any(i != j for i, j in structure.entries("F"))  # the template's run-time sweeps (also from a fixed D: step_plan)
     layout = c_layout(
         sizes, options, prefix,
         UnrolledDiscretizeSizes(unrolled.term_size, unrolled.active_size, balancing) if unrolled else None,
