@@ -350,6 +350,34 @@ def step_plan(
     return s, m
 
 
+@functools.lru_cache(maxsize=None)
+def single_step_thresholds(order: int, tolerance: float) -> tuple[float, ...]:
+    """theta_m, m = 1..order: the largest double theta with step_error_bound(theta, m, 0) <= tolerance.
+
+    The bound is a product and quotient of factors that do not decrease with
+    theta, each rounded (rounding is monotone), so it does not decrease with
+    theta either, and bound <= tolerance exactly when theta <= theta_m: the
+    generated C's plan compares ||F||_D T with these (a double each, printed
+    exactly) instead of summing the bound order by order whenever no doubling
+    is needed (theta <= theta_order), the same s and m as :func:`taylor_plan`
+    with no call of exp.  Found by bisection over the doubles' bit patterns.
+    """
+    out = []
+    for m in range(1, order + 1):
+        low, high = 0, int(np.float64(m + 1).view(np.int64))  # bit patterns of 0.0 and m + 1 (where the bound is huge)
+        if not step_error_bound(0.0, m, 0) <= tolerance:
+            out.append(-1.0)  # no step meets it (never for a tolerance above the unit roundoff)
+            continue
+        while high - low > 1:
+            mid = (low + high) // 2
+            if step_error_bound(float(np.int64(mid).view(np.float64)), m, 0) <= tolerance:
+                low = mid
+            else:
+                high = mid
+        out.append(float(np.int64(low).view(np.float64)))
+    return tuple(out)
+
+
 def _taylor_increment(F: np.ndarray, h: float, order: int) -> tuple[np.ndarray, np.ndarray]:
     """(E, S) over one step h: S = sum_(k=0..m) (F h)^k / (k+1)! by Horner's rule, E = Phi - I = F h S.
 

@@ -15,7 +15,7 @@ from modelgen.codegen.layout import CLayout, CompactDiscretizeSizes, UnrolledDis
 from modelgen.codegen.smoother import reset_inverse
 from modelgen.codegen.structure import FilterStructure
 from modelgen.codegen.van_loan import QD_MARGIN
-from modelgen.derivation.discretization import DOUBLE_ROUNDOFF, FLOAT_ROUNDOFF, nominal_scaling, series_range
+from modelgen.derivation.discretization import DOUBLE_ROUNDOFF, FLOAT_ROUNDOFF, nominal_scaling, series_range, single_step_thresholds
 from modelgen.errors import ModelError
 
 BANNER = "/* GENERATED FILE - DO NOT EDIT (modelgen) */"
@@ -558,6 +558,10 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         if options.taylor_tolerance is not None and options.taylor_tolerance > roundoff
         else None,  # a tolerance within the rounding of the arithmetic (any in float): the fixed order
         "recompute_threshold": c_number(options.recompute_threshold, options.scalar) if options.recompute_threshold is not None else None,
+        # theta_m of the plan's single-step fast path (double only: the thresholds are of the double bound)
+        "single_step_thresholds": [c_number(x, "double") for x in single_step_thresholds(options.taylor_order, options.taylor_tolerance)]
+        if options.scalar == "double" and options.taylor_tolerance is not None and options.taylor_tolerance > roundoff
+        else None,
         "discretize_unrolled": bool(unrolled),
         "van_loan": options.van_loan,
         "qd_margin": QD_MARGIN,
