@@ -685,6 +685,15 @@ static const ned_inertial16_scalar taylor_coefficient[10] = {
     1.0 / 3628800.0
 };
 
+/* theta_m, m = 1..TAYLOR_ORDER: the largest theta for which order m meets the tolerance without a
+        doubling
+   (modelgen.derivation.discretization.single_step_thresholds: the bound does not decrease with
+           theta, so
+   bound <= tolerance exactly when theta <= theta_m). */
+static const ned_inertial16_scalar single_step_threshold[9] = { 4.99999999999625e-13,
+        9.999993333339721e-07, 0.00014421629076473476, 0.0018601713250850419, 0.009009841196753044,
+        0.026537173699457135, 0.058551795853975144, 0.1075401723948457, 0.17446260620028906 };
+
 /* The doublings s and the order m summed for ||F||_D = norm and step T
    (modelgen.derivation.discretization.taylor_plan); ERR_NONFINITE beyond MAX_DOUBLINGS. */
 static int taylor_plan(const ned_inertial16_scalar norm, const ned_inertial16_scalar T, int
@@ -693,7 +702,18 @@ static int taylor_plan(const ned_inertial16_scalar norm, const ned_inertial16_sc
     /* the smallest s for which order TAYLOR_ORDER meets the tolerance, then the smallest order
        that meets it with that s */
     int s, k;
-    ned_inertial16_scalar theta = norm * T, growth = exp(norm * T), power = 1.0;
+    ned_inertial16_scalar theta = norm * T, growth, power = 1.0;
+    if (theta <= single_step_threshold[NED_INERTIAL16_TAYLOR_ORDER - 1]) {
+        /* no doubling: the smallest order whose threshold theta is within (the same s and m as the
+                loops below) */
+        for (k = 1; k < NED_INERTIAL16_TAYLOR_ORDER && !(theta <= single_step_threshold[k - 1]);
+                ++k) {
+        }
+        *halvings = 0;
+        *order = k;
+        return NED_INERTIAL16_OK;
+    }
+    growth = exp(theta);
     for (s = 0; !(modelgen_step_error_bound(growth, theta, NED_INERTIAL16_TAYLOR_ORDER, s) <=
             NED_INERTIAL16_TAYLOR_TOLERANCE); ++s) {
         if (s == NED_INERTIAL16_MAX_DOUBLINGS) {

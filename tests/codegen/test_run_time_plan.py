@@ -133,3 +133,46 @@ def test_short_step_q_d_agrees_with_van_loan_at_the_manoeuvre(augmented):
     assert c.discretize(T) == 0
     for qd in (qd_py, c.Qd):
         assert relative_error(qd, qd_exact) < 1e-5
+
+
+def test_the_c_plans_single_step_thresholds_are_exactly_where_the_bound_crosses_the_tolerance():
+    """theta_m (the generated C's fast path with no doubling): taylor_plan picks order m at theta_m and more just above it."""
+    from modelgen.derivation.discretization import single_step_thresholds
+
+    thresholds = single_step_thresholds(9, DEFAULT_TOLERANCE)
+    assert list(thresholds) == sorted(thresholds) and thresholds[-1] < 9 + 1
+    for m, theta in enumerate(thresholds, start=1):
+        s, order = taylor_plan(theta, 1.0, 9)
+        assert (s, order) == (0, m)
+        above = taylor_plan(float(np.nextafter(theta, 10.0)), 1.0, 9)
+        if m == 9:
+            assert above[0] == 1  # past the highest order's reach: a doubling
+        else:
+            assert above == (0, m + 1)
+
+
+def test_the_c_plan_is_the_reference_plan_on_both_sides_of_every_threshold(augmented, tmp_path):
+    """The generated C's taylor_plan (its fast path below theta_order, its loops above) called directly, at each
+    theta_m, the doubles either side of it and a spread of other norms: the same (s, m) as the reference."""
+    import subprocess
+
+    from modelgen.derivation.discretization import single_step_thresholds
+
+    derived, _, built = augmented
+    name = derived.model.name
+    thetas = []
+    for theta in single_step_thresholds(9, DEFAULT_TOLERANCE):
+        thetas += [theta, float(np.nextafter(theta, 0.0)), float(np.nextafter(theta, 10.0))]
+    thetas += [float(x) for x in np.geomspace(1e-15, 1e12, 200)]
+    (tmp_path / "plan.c").write_text(
+        f'#include "{name}.c"\n#include <stdio.h>\nint main(void)\n{{\n    static const double theta[] = {{ '
+        + ", ".join(repr(t) for t in thetas)
+        + " };\n    unsigned i;\n    for (i = 0; i < sizeof theta / sizeof theta[0]; ++i) {\n"
+        "        int s = -1, m = -1, status = taylor_plan(theta[i], 1.0, &s, &m);\n"
+        '        printf("%d %d %d\\n", status, s, m);\n    }\n    return 0;\n}\n'
+    )
+    subprocess.run(["gcc", "-std=c99", "-O2", f"-I{built.folder}", "plan.c", "-o", "plan", "-lm"], cwd=tmp_path, check=True)
+    lines = subprocess.run(["./plan"], cwd=tmp_path, check=True, capture_output=True, text=True).stdout.split("\n")
+    for theta, line in zip(thetas, lines):
+        status, s, m = map(int, line.split())
+        assert status == 0 and (s, m) == taylor_plan(theta, 1.0, 9), theta
