@@ -176,3 +176,63 @@ def test_the_c_plan_is_the_reference_plan_on_both_sides_of_every_threshold(augme
     for theta, line in zip(thetas, lines):
         status, s, m = map(int, line.split())
         assert status == 0 and (s, m) == taylor_plan(theta, 1.0, 9), theta
+
+
+def test_the_compact_loops_rebalance_as_the_unrolled_code_does(augmented, tmp_path, monkeypatch):
+    """The compact discretize (large models' loops, forced here) at the manoeuvre: Phi and Q_d as the reference's."""
+    from modelgen.codegen import kernels
+
+    derived, values, _ = augmented
+    monkeypatch.setattr(kernels, "COMPACT_ABOVE_FLOPS", 0)
+    built = build(derived, tmp_path / "compact", CodegenOptions())
+    assert "horner_series" in (built.folder / f"{derived.model.name}.c").read_text()  # the loops, not the unrolled blocks
+    m = derived.numeric(values)
+    scaling = nominal_scaling(derived)
+    c = _c_at(derived, values, built)
+    for T in (0.00247, 0.148, 1.0, 60.0, 86400.0):
+        assert c.discretize(T) == 0
+        phi_ref, gamma_ref = taylor_discretization(m["F"], m["G"], T, tolerance=DEFAULT_TOLERANCE, scaling=scaling)
+        assert relative_error(c.Phi, phi_ref) < 1e-13
+        assert relative_error(c.Qd, taylor_process_noise(gamma_ref, m["Q"], T)) < 1e-12
+
+
+def _c_norms(built, name: str, matrices: list[np.ndarray], tmp_path) -> list[tuple[float, float]]:
+    """(balanced_norm, rebalanced_norm) of the generated C, its static functions called directly, for each F."""
+    import subprocess
+
+    entries = [(int(i), int(j)) for i, j in zip(*np.nonzero(built.derived.structure("F")))]
+    sets = "\n".join(
+        "    " + " ".join(f"m.F[{e}] = {float(F[i, j])!r};" for e, (i, j) in enumerate(entries))
+        + '\n    printf("%.17g %.17g\\n", balanced_norm(&m), rebalanced_norm(&m, &ws.discretize));'
+        for F in matrices
+    )
+    (tmp_path / "norms.c").write_text(
+        f'#include "{name}.c"\n#include <stdio.h>\nstatic {name}_matrices m;\nstatic {name}_workspace ws;\n'
+        f"int main(void)\n{{\n{sets}\n    return 0;\n}}\n"
+    )
+    subprocess.run(["gcc", "-std=c99", "-O2", f"-I{built.folder}", "norms.c", "-o", "norms", "-lm"], cwd=tmp_path, check=True)
+    out = subprocess.run(["./norms"], cwd=tmp_path, check=True, capture_output=True, text=True).stdout.split()
+    return [(float(out[2 * k]), float(out[2 * k + 1])) for k in range(len(matrices))]
+
+
+@pytest.mark.parametrize("compact", [False, True])
+def test_the_c_norms_are_the_references_bit_for_bit(augmented, compact, tmp_path, monkeypatch):
+    """The fixed-D norm and the norm rebalanced from that D, in the unrolled and the compact C: the reference's exactly,
+    at the manoeuvre, the check point and random operating points on the same structure (so C plans as step_plan)."""
+    from modelgen.codegen import kernels
+    from modelgen.derivation.discretization import balancing_exponents, scaled_norm
+
+    derived, values, built = augmented
+    if compact:
+        monkeypatch.setattr(kernels, "COMPACT_ABOVE_FLOPS", 0)
+        built = build(derived, tmp_path / "compact", CodegenOptions())
+    scaling = nominal_scaling(derived)
+    F = derived.numeric(values)["F"]
+    rng = np.random.default_rng(3)
+    matrices = [F, derived.numeric(derived.model.check.parameter_values())["F"]]
+    matrices += [np.where(F != 0, rng.standard_normal(F.shape) * 10.0 ** rng.integers(-8, 8, F.shape), 0.0) for _ in range(4)]
+    matrices = [np.where(derived.structure("F"), G, 0.0) for G in matrices]
+    for G, (fixed, rebalanced) in zip(matrices, _c_norms(built, derived.model.name, matrices, tmp_path)):
+        assert fixed == scaled_norm(G, scaling)
+        assert rebalanced == scaled_norm(G, balancing_exponents(G, scaling))
+    assert _c_norms(built, derived.model.name, [F], tmp_path)[0][1] < 0.2 * scaled_norm(F, scaling)  # the manoeuvre: 0.89 against 7.1
