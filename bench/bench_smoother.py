@@ -25,7 +25,7 @@ RESULTS = HERE / "results"
 sys.path.insert(0, str(HERE.parent))
 
 from modelgen.fileio.datafiles import package_path  # noqa: E402
-from modelgen.navigator.cnav import GeneratedC, cached_c_navigator, rest_capacity  # noqa: E402
+from modelgen.navigator.cnav import GeneratedC, cached_c_navigator, rest_capacity, window_capacity  # noqa: E402
 from modelgen.navigator.config import load_config  # noqa: E402
 from modelgen.navigator.errorstate import model_path  # noqa: E402
 from modelgen.navigator.logs import read_gnss, read_imu  # noqa: E402
@@ -56,7 +56,8 @@ def measure(name: str) -> dict:
     fly(config, inputs, spec, record=record)
     forward_s = time.perf_counter() - mark
     arrays = record_arrays(record)
-    navigator, _ = cached_c_navigator(spec, lambda _: None, rest_capacity(config, inputs.time))
+    navigator, _ = cached_c_navigator(spec, lambda _: None, rest_capacity(config, inputs.time),
+                                      window_capacity(config, inputs.time))
     passes = {"generated C": GeneratedC(navigator), "generated Python": GeneratedPython(spec.module),
               "numpy reference": NumpyReference()}
     timings, results = {}, {}

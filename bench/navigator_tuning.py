@@ -33,6 +33,33 @@ maximum of the innovations' Gaussian log-likelihood of the GNSS-present flight
 (:mod:`modelgen.navigator.likelihood`), searched from the configuration's value
 (``--all``: every noise parameter, to see why the others are held).
 
+Stage 6 (``--markov [CONFIG] [--json FILE]``): the shaping filter for the GNSS position's time-correlated
+error (model ins_gnss24_gm_nav, configuration replay_drive_0708_gm.yaml; docs/replay-configuration.md,
+"Time-correlated GNSS errors").  The method and the decision, fixed before any outage was flown:
+
+1. start: the 21-state configuration flown with GNSS present and the position rows' R white (variance
+   factor 1); the autocovariance C_k of each position innovation row (metres) is fitted with
+   sigma_e^2 exp(-k T / tau) over lags 1 .. K (tuning.markov_fit; lag 0 holds the white noise): tau and
+   sigma_e of the mean autocovariance of the three rows start the search;
+2. estimate: the maximum of the innovations' log-likelihood with GNSS present (likelihood.maximum_likelihood)
+   over the Gauss-Markov tau, sigma_e and the white-noise factor together (the white-noise factor was
+   estimated with R x 13.4 and is re-estimated with the model that replaces that inflation), the position
+   R white (factor 1), every other number the 21-state configuration's;
+3. decision: the augmented model replaces R x f if its AIC = 2 k - 2 log L and its BIC = k ln n - 2 log L
+   (n = updates of every sensor) are both lower than the 21-state configuration's at its own estimates,
+   k counting the numbers estimated from this drive's innovations that the two do not share
+   (21 states: the white-noise factor and the position variance factor, k = 2; 24 states: the
+   white-noise factor, tau and sigma_e, k = 3);
+4. then the whiteness of the new position innovations (stage 4's statistics) and every sensor's NIS.
+
+Stage 6b (``--markov-check [STAGE6_JSON] [--json FILE]``): stage 6's search drove sigma_e to the boundary
+(0.4 mm, tau unbounded): its gain in log L over the 21-state configuration came from R at its white value,
+not from the states.  The 21-state configuration's R x f is not a likelihood estimate, so the decision is
+taken again against the 21-state model at its own maximum likelihood with the position R white (the
+white-noise factor, k = 1), beside a profile of log L over sigma_e at tau = 2 s (stage 4's decorrelation
+time): the augmented model is adopted only if it beats both 21-state configurations on AIC and BIC.  This
+check was added after stage 6's likelihoods were seen and before any outage was flown.
+
 No outage is flown and no outage error is computed here: the choice cannot
 see them.  Prints a table and the chosen values, which go into
 modelgen/data/replay_drive_0708.yaml by hand (with this script named there).
@@ -41,6 +68,8 @@ modelgen/data/replay_drive_0708.yaml by hand (with this script named there).
     python bench/navigator_tuning.py --stage3   # stage 3 only (seconds)
     python bench/navigator_tuning.py --correlation [CONFIG] [--json FILE]   # stage 4 (about a minute)
     python bench/navigator_tuning.py --likelihood [CONFIG] [--json FILE]    # stage 5 (about half an hour)
+    python bench/navigator_tuning.py --markov [CONFIG] [--json FILE]        # stage 6 (about half an hour)
+    python bench/navigator_tuning.py --markov-check [STAGE6_JSON] [--json FILE]   # stage 6b (a few minutes)
 """
 
 from __future__ import annotations
@@ -245,6 +274,157 @@ def likelihood(arguments: list[str]) -> None:
         print(f"written {out_json}")
 
 
+def markov(arguments: list[str]) -> None:
+    """Stage 6: the shaping filter's tau and sigma_e (and the white-noise factor) by maximum likelihood, the
+    decision against the 21-state configuration by AIC and BIC (module docstring)."""
+    import json
+    import time
+
+    from modelgen.navigator import likelihood as ml
+    from modelgen.navigator import tuning
+    from modelgen.navigator.config import load_config
+    from modelgen.navigator.errorstate import model_path
+    from modelgen.navigator.logs import read_gnss, read_imu
+    from modelgen.navigator.navigator import prepare
+    from modelgen.navigator.spec import navigator_spec
+    from modelgen.fileio.datafiles import package_path
+
+    out_json, arguments = _json_option(arguments)
+    shipped = load_config(arguments[0] if arguments else package_path("data", "replay_drive_0708_gm.yaml"))
+    baseline = load_config(package_path("data", "replay_drive_0708_21.yaml"))
+    inputs = prepare(shipped, read_imu(shipped.imu_source, shipped.gap_factor, shipped.gap_action),
+                     read_gnss(shipped.gnss_source))
+    spec21 = navigator_spec(model_path(baseline.model, baseline.path))
+    spec = navigator_spec(model_path(shipped.model, shipped.path))
+    started = time.time()
+    # 1. the start: the 21-state filter with the position R white
+    white21 = dataclasses.replace(baseline, gnss_position_variance_factor=1.0)
+    sources, _ = tuning.record_innovations(white21, inputs, spec21)
+    start = tuning.markov_start(sources, spec21)
+    print(f"stage 6: {shipped.path} ({spec.name}), GNSS present everywhere, no outage flown")
+    print(f"1. autocovariance of the position innovations, 21 states, R white (T = {start['period_s']:.3f} s):")
+    for label, fit in start["rows"].items():
+        print(f"   {label:15} tau {fit.tau_s:5.2f} s  sigma_e {fit.sigma:.4f} m  (lags 1..{fit.lags}, rest "
+              f"{fit.white_sigma:.4f} m)")
+    pooled = start["pooled"]
+    print(f"   mean of the three: tau {pooled.tau_s:.2f} s, sigma_e {pooled.sigma:.4f} m")
+    # the 21-state configuration at its own estimates
+    base_sources, _ = tuning.record_innovations(baseline, inputs, spec21)
+    base_l = ml.log_likelihood(base_sources)
+    n_updates = sum(len(e.time) for e in base_sources.values())
+    # 2. the estimate
+    keys = ("noise.gyro_white.factor", "parameters.gnss_error_time", "parameters.gnss_error_sigma")
+    config = ml.with_parameters(shipped, {"parameters.gnss_error_time": pooled.tau_s,
+                                          "parameters.gnss_error_sigma": pooled.sigma,
+                                          "noise.gyro_white.factor": ml.parameter_value(baseline,
+                                                                                        "noise.gyro_white.factor")})
+
+    def progress(flights: int, total: float, values: dict[str, float]) -> None:
+        print(f"  flight {flights:3d} ({time.time() - started:6.0f} s): log L {total:10.1f}  "
+              + " ".join(f"{k.split('.')[-2] if k.startswith('noise.') else k.split('.')[-1]}={v:.4g}"
+                         for k, v in values.items()), flush=True)
+
+    print("2. maximum likelihood over " + ", ".join(keys))
+    estimate = ml.maximum_likelihood(config, ml.gnss_present_innovations(inputs, spec), keys, max_flights=90,
+                                     progress=progress)
+    print(f"{estimate.flights} flights, converged: {estimate.converged} ({estimate.message})")
+    for key in keys:
+        print(f"  {key}: {estimate.before[key]:.4g} -> {estimate.after[key]:.4g}")
+    after = ml.with_parameters(config, estimate.after)
+    sources, _ = tuning.record_innovations(after, inputs, spec)
+    gm_l = ml.log_likelihood(sources)
+    criteria = {"ins_gnss21_rw_nav (R x f)": ml.information_criteria(base_l["total"], 2, n_updates),
+                "ins_gnss24_gm_nav (Gauss-Markov)": ml.information_criteria(gm_l["total"], 3, n_updates)}
+    print("3. decision (log L with GNSS present; AIC, BIC):")
+    for name, c in criteria.items():
+        print(f"   {name:34} log L {c['log_likelihood']:10.1f}  k {c['parameters']}  AIC {c['aic']:10.1f}  "
+              f"BIC {c['bic']:10.1f}")
+    a, b = criteria.values()
+    better = b["aic"] < a["aic"] and b["bic"] < a["bic"]
+    print(f"   per sensor, 21 states: " + ", ".join(f"{k} {v:.1f}" for k, v in base_l.items()))
+    print(f"   per sensor, 24 states: " + ", ".join(f"{k} {v:.1f}" for k, v in gm_l.items()))
+    print(f"   -> {'the Gauss-Markov model is better: it is adopted' if better else 'the Gauss-Markov model is NOT better'}")
+    stats = tuning.row_statistics(sources, tuning.row_labels(spec))
+    print("4. whiteness of the innovations at the estimate (stage 4's statistics):")
+    for st in stats:
+        print(f"   {st.source:5} {st.label:15} tau {st.tau_s:6.2f} s  f {st.factor:6.2f}")
+    nis = [dataclasses.asdict(c) for c in tuning.consistency(sources)]
+    for c in nis:
+        print(f"   NIS {c['source']:8} rows {c['rows']}  updates {c['updates']:5d}  mean {c['mean']:7.2f}  "
+              f"median {c['median']:6.2f}  inside 95 % {100 * c['inside_95']:5.1f} %")
+    if out_json:
+        result = {"configuration": Path(str(shipped.path)).name, "model": spec.name,
+                  "start": {"period_s": start["period_s"], "rows": {k: dataclasses.asdict(v) for k, v in start["rows"].items()},
+                            "pooled": dataclasses.asdict(pooled)},
+                  "estimate": dataclasses.asdict(estimate), "log_likelihood_21": base_l, "log_likelihood_24": gm_l,
+                  "criteria": criteria, "adopted": better, "whiteness": [dataclasses.asdict(st) for st in stats],
+                  "nis_after": nis}
+        Path(out_json).write_text(json.dumps(result, indent=2, default=float) + "\n")
+        print(f"written {out_json}")
+
+
+def markov_check(arguments: list[str]) -> None:
+    """Stage 6b (module docstring): the decision against the 21-state model at its own maximum likelihood."""
+    import json
+    import time
+
+    from modelgen.navigator import likelihood as ml
+    from modelgen.navigator import tuning
+    from modelgen.navigator.config import load_config
+    from modelgen.navigator.errorstate import model_path
+    from modelgen.navigator.logs import read_gnss, read_imu
+    from modelgen.navigator.navigator import prepare
+    from modelgen.navigator.spec import navigator_spec
+    from modelgen.fileio.datafiles import package_path
+
+    out_json, arguments = _json_option(arguments)
+    stage6 = json.loads(Path(arguments[0] if arguments else "bench/results/navigator_tuning_stage6_gm.json").read_text())
+    baseline = load_config(package_path("data", "replay_drive_0708_21.yaml"))
+    shipped = load_config(package_path("data", "replay_drive_0708_gm.yaml"))
+    inputs = prepare(baseline, read_imu(baseline.imu_source, baseline.gap_factor, baseline.gap_action),
+                     read_gnss(baseline.gnss_source))
+    spec21 = navigator_spec(model_path(baseline.model, baseline.path))
+    spec = navigator_spec(model_path(shipped.model, shipped.path))
+    started = time.time()
+
+    def progress(flights: int, total: float, values: dict[str, float]) -> None:
+        print(f"  flight {flights:3d} ({time.time() - started:6.0f} s): log L {total:10.1f}  "
+              + " ".join(f"{k}={v:.4g}" for k, v in values.items()), flush=True)
+
+    white21 = dataclasses.replace(baseline, gnss_position_variance_factor=1.0)
+    print("stage 6b: 21 states, position R white: maximum likelihood over the white-noise factor (GNSS present)")
+    estimate21 = ml.maximum_likelihood(white21, ml.gnss_present_innovations(inputs, spec21),
+                                       ("noise.gyro_white.factor",), progress=progress)
+    l21w = estimate21.log_likelihood_after
+    n_updates = stage6["criteria"]["ins_gnss21_rw_nav (R x f)"]["updates"]
+    factor = stage6["estimate"]["after"]["noise.gyro_white.factor"]
+    print(f"profile of log L over sigma_e at tau = 2 s, 24 states, white-noise factor {factor:.4g}:")
+    profile = []
+    for sigma in (0.001, 0.003, 0.01, 0.02, 0.05):
+        config = ml.with_parameters(shipped, {"noise.gyro_white.factor": factor, "parameters.gnss_error_time": 2.0,
+                                              "parameters.gnss_error_sigma": sigma})
+        total = ml.log_likelihood(ml.gnss_present_innovations(inputs, spec)(config))["total"]
+        profile.append({"tau_s": 2.0, "sigma_e_m": sigma, "log_likelihood": total})
+        print(f"   sigma_e {sigma:6.3f} m: log L {total:10.1f}", flush=True)
+    criteria = {"ins_gnss21_rw_nav (R x f)": stage6["criteria"]["ins_gnss21_rw_nav (R x f)"],
+                "ins_gnss21_rw_nav (R white)": ml.information_criteria(l21w["total"], 1, n_updates),
+                "ins_gnss24_gm_nav (Gauss-Markov)": stage6["criteria"]["ins_gnss24_gm_nav (Gauss-Markov)"]}
+    print("decision (log L with GNSS present; AIC, BIC):")
+    for name, c in criteria.items():
+        print(f"   {name:34} log L {c['log_likelihood']:10.1f}  k {c['parameters']}  AIC {c['aic']:10.1f}  "
+              f"BIC {c['bic']:10.1f}")
+    gm = criteria["ins_gnss24_gm_nav (Gauss-Markov)"]
+    better = all(gm["aic"] < c["aic"] and gm["bic"] < c["bic"] for name, c in criteria.items() if "24" not in name)
+    print(f"   white-noise factor, 21 states R white: {estimate21.before['noise.gyro_white.factor']:.4g} -> "
+          f"{estimate21.after['noise.gyro_white.factor']:.4g} ({estimate21.flights} flights)")
+    print(f"   -> {'the Gauss-Markov model is better than both: adopted' if better else 'the Gauss-Markov model is NOT better than the 21-state model at its own estimate: not adopted'}")
+    if out_json:
+        result = {"estimate_21_white": dataclasses.asdict(estimate21), "profile": profile, "criteria": criteria,
+                  "adopted": better}
+        Path(out_json).write_text(json.dumps(result, indent=2, default=float) + "\n")
+        print(f"written {out_json}")
+
+
 if __name__ == "__main__":
     if sys.argv[1:] == ["--stage3"]:
         stage3()
@@ -252,5 +432,9 @@ if __name__ == "__main__":
         correlation(sys.argv[2:])
     elif sys.argv[1:2] == ["--likelihood"]:
         likelihood(sys.argv[2:])
+    elif sys.argv[1:2] == ["--markov"]:
+        markov(sys.argv[2:])
+    elif sys.argv[1:2] == ["--markov-check"]:
+        markov_check(sys.argv[2:])
     else:
         main()

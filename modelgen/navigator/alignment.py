@@ -81,7 +81,9 @@ class Alignment:
 
 def still_window_samples(config: NavigatorConfig, time: np.ndarray) -> int:
     """The still detector's window in samples at the log's median rate (at least 2)."""
-    return max(2, int(round(config.still_window / float(np.median(np.diff(time))))))
+    from modelgen.navigator.cconfig_fields import WINDOW_SAMPLES_MIN
+
+    return max(WINDOW_SAMPLES_MIN, int(round(config.still_window / float(np.median(np.diff(time))))))
 
 
 def still_samples(force: np.ndarray, rate: np.ndarray, size: int, gyro_std_max: float,

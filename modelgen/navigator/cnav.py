@@ -28,6 +28,7 @@ from modelgen.codegen.build import compile_shared_library
 from modelgen.codegen.generate import generate_code, template_folder
 from modelgen.errors import ModelError
 from modelgen.navigator import cconfig
+from modelgen.navigator.cconfig_fields import WINDOW_SAMPLES_MIN
 from modelgen.navigator.config import NavigatorConfig
 from modelgen.navigator.navigator import OUTPUT_FIELDS, Flight, Inputs
 from modelgen.navigator.outages import in_outage, outage_windows
@@ -38,6 +39,8 @@ from modelgen.model import wgs84
 
 N_GNSS, N_ALIGNMENT = 13, 8
 N_OUTPUT = len(OUTPUT_FIELDS)  # entries of one output record, C and Python alike
+#: an output record's entries by name (navigator.OUTPUT_FIELDS; the template's ``out``)
+OUT = {name: i for i, name in enumerate(OUTPUT_FIELDS)}
 #: the C's counters: the GNSS update's, one per aiding sensor tried at a covariance step (the table's order), predicts
 COUNT_NAMES = ("gnss_updates", "gnss_rejected", "gnss_released", "gnss_deweighted", "gnss_quality_skipped",
                *(s.counter for s in step_sensors(SENSORS)), "predicts")
@@ -45,11 +48,26 @@ ALIGNMENT_NAMES = ("time", "roll", "pitch", "heading", "rest_end", "rest_samples
 #: IMU samples the C keeps for its alignment by default ({P}_NAV_REST_MAX in the header); a configuration whose
 #: rest window needs more is built with a larger ring (:func:`rest_capacity`, -D{P}_NAV_REST_MAX)
 REST_MAX = 1024
-#: the C's alignment statuses (header: {P}_NAV_ERR_*); 11 and 12 are explained by the Python rules' diagnosis
-ALIGNMENT_ERRORS = {
-    13: "the rest window held more IMU samples than the C navigator was built to keep (its ring overflowed)",
-    14: "an aiding sample named a sensor slot the C navigator does not have",
+#: the zero-velocity detector's window buffer by default ({P}_NAV_WINDOW_MAX); a configuration whose ZUPT window
+#: needs more samples is built with a larger one (:func:`window_capacity`, -D{P}_NAV_WINDOW_MAX)
+WINDOW_MAX = cconfig.WINDOW_MAX
+#: the C navigator's own statuses after the filter's 1 and 2 (header {P}_NAV_ERR_<name>, rendered from this table):
+#: name -> (status, meaning); NO_REST and FEW_REST are explained by the Python rules' diagnosis
+NAV_STATUS = {
+    "NO_REST": (11, "a used epoch faster than config.heading_speed came before any rest window"),
+    "FEW_REST": (12, "fewer than 10 IMU samples in the rest window"),
+    "REST_OVERFLOW": (13, "the rest window held more IMU samples than the C navigator was built to keep "
+                          "(its ring overflowed)"),
+    "AID_SLOT": (14, "an aiding sample named a sensor slot the C navigator does not have"),
+    "RECORD_FULL": (15, "the forward record's buffers are full (navigator_set_record)"),
+    "GNSS_UPDATE": (16, "an ecef model's GNSS update (dense rows) met a covariance that is not positive"),
+    "CARRIED": (17, "a carried state (an aiding sensor's own error) has no steady state at the alignment: its "
+                    "Gauss-Markov rate is not positive at the configured parameters"),
 }
+#: the alignment statuses whose meaning is the error itself
+ALIGNMENT_ERRORS = {NAV_STATUS[name][0]: NAV_STATUS[name][1] for name in ("REST_OVERFLOW", "AID_SLOT", "CARRIED")}
+#: NAV_ERR_RECORD_FULL of the navigator header.
+RECORD_FULL = NAV_STATUS["RECORD_FULL"][0]
 
 
 def earth_constants() -> dict[str, str]:
@@ -79,7 +97,9 @@ def template_context(spec: NavigatorSpec) -> dict:
     output = [None, None, None]
     for i, a, sg in zip(pos.indices, pos.axes, pos.signs):
         output[a] = (i, _literal(sg * (-1.0 if a == 2 else 1.0)))
-    return {**aiding_context(), "blocks": blocks, "sensor_targets": [(k, SENSOR_TARGETS[k]) for k in SENSOR_BLOCKS if k in spec.blocks],
+    carried = list(spec.carried)
+    return {**aiding_context(), "blocks": blocks, "carried": carried,
+            "carried_of": [carried.index(i) if i in carried else -1 for i in range(spec.n_states)], "sensor_targets": [(k, SENSOR_TARGETS[k]) for k in SENSOR_BLOCKS if k in spec.blocks],
             "parameters": parameters, "position_output": output,
             "gnss_rows": [{"kind": r.kind, "axis": r.axis, "sign": _literal(r.sign), "sigma_index": r.sigma_index}
                           for r in spec.gnss_rows],
@@ -87,7 +107,9 @@ def template_context(spec: NavigatorSpec) -> dict:
             "ecef": spec.ecef, "gnss_rotation": _gnss_rotation(spec),
             "rows_max": max(6, len(spec.gnss_rows)), "n_free": len(free), "free_names": ", ".join(free) or "none",
             "config_struct": cconfig.c_struct(spec.name, len(free)), "mechanization_rates": spec.rates_c,
-            "out": {name: i for i, name in enumerate(OUTPUT_FIELDS)}, "n_output": N_OUTPUT}
+            "config_checks": cconfig.c_checks(spec.name.upper(), len(free)), "window_max": WINDOW_MAX,
+            "rest_max": REST_MAX, "nav_status": NAV_STATUS,
+            "out": OUT, "n_output": N_OUTPUT}
 
 
 def _gnss_rotation(spec: NavigatorSpec) -> dict | None:
@@ -136,10 +158,11 @@ def generate_c_navigator(spec: NavigatorSpec, folder: Path) -> Path:
 class CNavigator:
     """The compiled navigator library (one model)."""
 
-    def __init__(self, library: Path, spec: NavigatorSpec, rest_max: int = REST_MAX):
+    def __init__(self, library: Path, spec: NavigatorSpec, rest_max: int = REST_MAX, window_max: int = WINDOW_MAX):
         self.spec = spec
         self.model = spec.name
         self.rest_max = rest_max  # the alignment ring it was built with
+        self.window_max = window_max  # the zero-velocity detector's window buffer it was built with
         self.lib = ctypes.CDLL(str(library))
         self.size = int(self._fn("navigator_size", [], ctypes.c_ulong)())
         dp = ctypes.POINTER(ctypes.c_double)
@@ -221,18 +244,21 @@ SMOOTH_STATUS = {1: "non-finite input or result", 2: "a prior covariance is not 
                  3: "a transition entry outside the pattern of Phi, or correction_start does not index the corrections"}
 
 
-def rest_define(model: str, rest_max: int) -> str:
-    """The compiler flag that sizes the C's alignment ring."""
-    return f"-D{model.upper()}_NAV_REST_MAX={int(rest_max)}"
+def capacity_defines(model: str, rest_max: int, window_max: int = WINDOW_MAX) -> tuple[str, str]:
+    """The compiler flags that size the C's buffers: the alignment ring and the zero-velocity detector's window."""
+    return (f"-D{model.upper()}_NAV_REST_MAX={int(rest_max)}", f"-D{model.upper()}_NAV_WINDOW_MAX={int(window_max)}")
 
 
-def build_c_navigator(spec: NavigatorSpec, folder: Path, rest_max: int = REST_MAX) -> CNavigator:
-    """Generate, compile (strict C99, -O2) and load the navigator for a spec (ring of ``rest_max`` samples)."""
+def build_c_navigator(spec: NavigatorSpec, folder: Path, rest_max: int = REST_MAX,
+                      window_max: int = WINDOW_MAX) -> CNavigator:
+    """Generate, compile (strict C99, -O2) and load the navigator for a spec (ring of ``rest_max`` samples, detector
+    window of ``window_max``)."""
     folder = generate_c_navigator(spec, folder)
     model = spec.name
     library = compile_shared_library([folder / f"{model}.c", folder / f"{model}_navigator.c"],
-                                     folder / f"lib{model}_navigator.so", ("-O2", rest_define(model, rest_max)))
-    return CNavigator(library, spec, rest_max)
+                                     folder / f"lib{model}_navigator.so",
+                                     ("-O2", *capacity_defines(model, rest_max, window_max)))
+    return CNavigator(library, spec, rest_max, window_max)
 
 
 def rest_capacity(config: NavigatorConfig, time: np.ndarray) -> int:
@@ -244,9 +270,18 @@ def rest_capacity(config: NavigatorConfig, time: np.ndarray) -> int:
     time = np.asarray(time, float)
     need = int(np.max(np.arange(len(time)) - np.searchsorted(time, time - config.rest_window, side="left"))) + 3
     median_dt = float(np.median(np.diff(time)))
-    need = max(need, max(2, int(round(config.still_window / median_dt))) + 1,
-               max(2, int(round(config.zupt_window / median_dt))) + 1)
+    need = max(need, max(WINDOW_SAMPLES_MIN, int(round(config.still_window / median_dt))) + 1,
+               max(WINDOW_SAMPLES_MIN, int(round(config.zupt_window / median_dt))) + 1)
     return max(REST_MAX, 1 << (need - 1).bit_length())
+
+
+def window_capacity(config: NavigatorConfig, time: np.ndarray) -> int:
+    """The zero-velocity detector's window buffer the C needs: the ZUPT window's samples at the log's median IMU
+    rate (as the configuration's field is computed) plus one, rounded up to a power of two, at least
+    :data:`WINDOW_MAX`.  A 1 kHz IMU with a 0.5-s window needs 512."""
+    median_dt = float(np.median(np.diff(np.asarray(time, float))))
+    need = max(WINDOW_SAMPLES_MIN, int(round(config.zupt_window / median_dt))) + 1
+    return max(WINDOW_MAX, 1 << (need - 1).bit_length())
 
 
 def cache_folder() -> Path:
@@ -258,13 +293,15 @@ def cache_folder() -> Path:
     return library_cache_folder()
 
 
-def navigator_key(model_file: Path, rest_max: int) -> str:
+def navigator_key(model_file: Path, rest_max: int, window_max: int = WINDOW_MAX) -> str:
     """The cache key of a compiled navigator: what the library is made from, without deriving the model.
 
     The sha256 of the model file, the navigator templates, the filter's templates and printer (everything under
-    modelgen/codegen/backends), modelgen's version, the alignment ring's size and the compiler's identity.
+    modelgen/codegen/backends), modelgen's version, the alignment ring's and detector window's sizes and the compiler's identity.
     """
     from modelgen.codegen.build import STRICT_FLAGS, compiler, compiler_identity
+    from modelgen.fileio.datafiles import data_path
+    from modelgen.navigator.config_schema import SCHEMA_FILE
 
     digest = hashlib.sha256(b"modelgen-navigator-library 2\n" + __version__.encode())
     digest.update(Path(model_file).read_bytes())
@@ -272,26 +309,27 @@ def navigator_key(model_file: Path, rest_max: int) -> str:
     sources = sorted(Path(template_folder()).glob("*.j2")) + sorted(backends.rglob("*.j2")) + sorted(backends.rglob("*.py"))
     here = Path(__file__).resolve().parent
     sources += [here / "spec.py", here / "cconfig.py", here / "cconfig_fields.py", here / "cnav.py", here / "sensors.py",
-                here / "ecef.py"]  # they shape the rendered C
+                here / "ecef.py", here / "config.py"]  # they shape the rendered C
+    sources.append(data_path(SCHEMA_FILE))  # the configuration check's bounds (cconfig.bounds)
     codegen = backends.parent  # the mechanization rates' generator and their symbolic source
     sources += [codegen / "mechanization.py", codegen.parent / "derivation" / "mechanization_rates.py"]
     for template in sources:
         digest.update(template.name.encode() + template.read_bytes())
-    digest.update(f"\nrest_max {int(rest_max)}\nflags {' '.join(STRICT_FLAGS)} -O2\n".encode())
+    digest.update(f"\nrest_max {int(rest_max)}\nwindow_max {int(window_max)}\nflags {' '.join(STRICT_FLAGS)} -O2\n".encode())
     digest.update(compiler_identity(compiler()).encode())
     return "navigator-" + digest.hexdigest()
 
 
-def _load_payload(payload: bytes, spec: NavigatorSpec, rest_max: int) -> CNavigator:
+def _load_payload(payload: bytes, spec: NavigatorSpec, rest_max: int, window_max: int) -> CNavigator:
     """Load a library from its bytes: written to a private temporary file, loaded, the file removed."""
     with tempfile.TemporaryDirectory(prefix="modelgen-navigator-") as folder:
         library = Path(folder) / f"lib{spec.name}_navigator.so"
         library.write_bytes(payload)
-        return CNavigator(library, spec, rest_max)
+        return CNavigator(library, spec, rest_max, window_max)
 
 
 def cached_c_navigator(spec: NavigatorSpec, echo=lambda message: None,
-                       rest_max: int = REST_MAX) -> tuple[CNavigator, bool]:
+                       rest_max: int = REST_MAX, window_max: int = WINDOW_MAX) -> tuple[CNavigator, bool]:
     """The compiled navigator for a spec's model file, from the compile cache when its inputs are unchanged.
 
     Key: :func:`navigator_key`.  The entry is the compile cache's (:mod:`modelgen.codegen.build`): verified by its
@@ -302,13 +340,13 @@ def cached_c_navigator(spec: NavigatorSpec, echo=lambda message: None,
     from modelgen.codegen.build import cached_library, store_library
 
     folder = cache_folder()
-    key = navigator_key(spec.model_file, rest_max)
+    key = navigator_key(spec.model_file, rest_max, window_max)
     payload = cached_library(folder, key)
     if payload is not None:
-        return _load_payload(payload, spec, rest_max), True
+        return _load_payload(payload, spec, rest_max, window_max), True
     echo(f"  generating and compiling the C navigator (once; cached in {folder})")
     with tempfile.TemporaryDirectory(prefix="modelgen-navigator-build-") as build:
-        navigator = build_c_navigator(spec, Path(build) / "navigator", rest_max)
+        navigator = build_c_navigator(spec, Path(build) / "navigator", rest_max, window_max)
         library = Path(build) / "navigator" / f"lib{navigator.model}_navigator.so"
         try:
             folder.mkdir(parents=True, exist_ok=True)
@@ -323,7 +361,7 @@ def config_values(config: NavigatorConfig, spec: NavigatorSpec, time_: np.ndarra
     from modelgen.navigator.alignment import still_window_samples
 
     median_dt = float(np.median(np.diff(time_)))
-    window = max(2, int(round(config.zupt_window / median_dt)))
+    window = max(WINDOW_SAMPLES_MIN, int(round(config.zupt_window / median_dt)))
     step = max(1, int(round(config.predict_period / median_dt)))
     return cconfig.values(config, spec, window, step, still_window_samples(config, time_))
 
@@ -347,6 +385,7 @@ class LogArrays:
     gnss: np.ndarray  # (epochs, 13)
     windows: list[tuple[float, float]]
     rest_max: int = REST_MAX  # the alignment ring this log and configuration need (:func:`rest_capacity`)
+    window_max: int = WINDOW_MAX  # the detector window buffer they need (:func:`window_capacity`)
     #: the enabled aiding sensors' log samples, merged in time order: time [s], slot (NAV_N_AID order), value [SI]
     aid_time: np.ndarray = field(default_factory=lambda: np.zeros(0))
     aid_slot: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
@@ -369,7 +408,8 @@ def log_arrays(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec) -> 
     aid_time, aid_slot, aid_value = aiding_samples(inputs, values)
     return LogArrays(values, len(spec.free_parameters), time_, force, rate,
                      contiguous(g.time[epochs]), contiguous(target), contiguous((~outage[epochs]).astype(np.int32)),
-                     contiguous(gnss), windows, rest_capacity(config, time_), aid_time, aid_slot, aid_value)
+                     contiguous(gnss), windows, rest_capacity(config, time_), window_capacity(config, time_),
+                     aid_time, aid_slot, aid_value)
 
 
 def aiding_samples(inputs: Inputs, values: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -392,9 +432,25 @@ def alignment_error(config: NavigatorConfig, inputs: Inputs, status: int) -> Mod
     """The error for a C navigator status: an alignment failure is explained by the Python rules' own diagnosis."""
     if status in ALIGNMENT_ERRORS:
         return ModelError(f"{inputs.gnss.path}: C navigator alignment: {ALIGNMENT_ERRORS[status]}")
-    if status in (11, 12):
+    if status in (NAV_STATUS["NO_REST"][0], NAV_STATUS["FEW_REST"][0]):
         return not_aligned_error(config, inputs)
     return ModelError(f"C navigator: a filter step failed (status {status})")
+
+
+def configuration_error(config: NavigatorConfig, field_values: dict, status: int, rest_max: int,
+                        window_max: int = WINDOW_MAX) -> ModelError:
+    """The error for a configuration the C navigator refused (its NAV_ERR_CONFIG_* status): the field's key and line,
+    its value and bounds (:func:`modelgen.navigator.cconfig.refusal`)."""
+    item = cconfig.CONFIG_STATUS.get(status)
+    if item is None:
+        return ModelError(f"{config.path}: the C navigator refused its configuration with status {status}, "
+                          "which names no configuration field (a navigator built by another modelgen?)")
+    return cconfig.refusal(config.path, item, field_values[item.name], capacities(rest_max, window_max), "C", status)
+
+
+def capacities(rest_max: int = REST_MAX, window_max: int = WINDOW_MAX) -> dict[str, int]:
+    """The C navigator's capacities that bound configuration fields (cconfig.Field maximum / minimum names)."""
+    return {"WINDOW_MAX": window_max, "REST_MAX": rest_max}
 
 
 def not_aligned_error(config: NavigatorConfig, inputs: Inputs) -> ModelError:
@@ -413,12 +469,13 @@ def flight_from_outputs(out: np.ndarray, arrays: LogArrays, inputs: Inputs, coun
                         alignment: dict[str, float], estimated: tuple[str, ...] = ()) -> Flight:
     """A Flight from the C output records (rows before the alignment and after the log's end dropped)."""
     out = out[~np.isnan(out[:, 0])]
-    nis = out[(out[:, 19] == 0) & ~np.isnan(out[:, 21]), 21]
+    nis = out[(out[:, OUT["in_outage"]] == 0) & ~np.isnan(out[:, OUT["nis"]]), OUT["nis"]]
     return Flight(out, arrays.windows, inputs.first_epoch, alignment["time"], list(nis),
                   float(arrays.cfg["gate_gnss"]), counts, list(inputs.notes), alignment, estimated=estimated)
 
 
-#: Entries of a recorded nominal state (NAV_RECORD_NOMINAL): the navigation vector, then the sensor estimates.
+#: Entries of a recorded nominal state (NAV_RECORD_NOMINAL): the navigation vector, then the sensor estimates, then
+#: the carried estimates (NavigatorSpec.carried).
 NAV_SIZE = 10
 RECORD_SENSORS = ("gyro_bias", "accel_bias", "gyro_scale_factor", "accel_scale_factor")
 
@@ -449,7 +506,7 @@ class RecordBuffers:
     output_corrections_before: np.ndarray
 
     @classmethod
-    def sized(cls, arrays: "LogArrays", n: int, table=SENSORS) -> "RecordBuffers":
+    def sized(cls, arrays: "LogArrays", n: int, table=SENSORS, n_carried: int = 0) -> "RecordBuffers":
         """Capacities: a covariance step closes every predict_samples IMU samples or at a GNSS epoch (steps <=
         n_imu / predict_samples + epochs + the alignment's), each step tries every step sensor once and each
         epoch makes at most one GNSS update (corrections <= steps x step sensors + epochs), one output per epoch."""
@@ -458,7 +515,7 @@ class RecordBuffers:
         corrections = steps * len(step_sensors(table)) + epochs
         return cls(np.zeros((steps, n, n)), np.zeros((steps, n, n)), np.zeros((steps, n, n)),
                    np.zeros(steps + 1, dtype=ctypes.c_long), np.zeros((max(corrections, 1), n)),
-                   np.zeros((max(epochs, 1), NAV_SIZE + 12)), np.zeros(max(epochs, 1), dtype=ctypes.c_long),
+                   np.zeros((max(epochs, 1), NAV_SIZE + 12 + n_carried)), np.zeros(max(epochs, 1), dtype=ctypes.c_long),
                    np.zeros(max(epochs, 1), dtype=ctypes.c_long))
 
     def structure(self) -> RecordStruct:
@@ -499,11 +556,13 @@ def forward_record_from_c(buffers: RecordBuffers, counts: RecordStruct, spec: Na
         row = out[j]
         nominal = buffers.nominal[i]
         sensors = {name: nominal[NAV_SIZE + 3 * b:NAV_SIZE + 3 * b + 3].copy() for b, name in enumerate(RECORD_SENSORS)}
+        sensors["carried"] = nominal[NAV_SIZE + 12:NAV_SIZE + 12 + len(spec.carried)].copy()
         k = int(arrays.target[j])
         record.outputs.append(OutputSnapshot(int(buffers.output_step[i]), int(buffers.output_corrections_before[i]),
                                              nominal[:NAV_SIZE].copy(), sensors,
                                              partial(_row, spec, float(arrays.time[k]), lever, arrays.rate[k],
-                                                     bool(row[19]), int(row[20]), float(row[21]), int(row[22]))))
+                                                     bool(row[OUT["in_outage"]]), int(row[OUT["gnss_used"]]),
+                                                     float(row[OUT["nis"]]), int(row[OUT["gnss_quality"]]))))
     return record
 
 
@@ -517,14 +576,18 @@ def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator, record
     if a.rest_max > navigator.rest_max:
         raise ModelError(f"{config.path}: this configuration's rest window needs an alignment ring of {a.rest_max} IMU "
                          f"samples; the C navigator was built with {navigator.rest_max} (cached_c_navigator(rest_max=))")
+    if a.window_max > navigator.window_max:
+        raise ModelError(f"{config.path}: this configuration's zero-velocity window needs a detector buffer of "
+                         f"{a.window_max} IMU samples; the C navigator was built with {navigator.window_max} "
+                         "(cached_c_navigator(window_max=))")
     state = ctypes.create_string_buffer(navigator.size)
     struct = cconfig.to_structure(a.cfg, a.n_parameters)
-    if navigator.configure(state, ctypes.byref(struct)):
-        raise ModelError(f"{config.path}: the C navigator refused its configuration (ZUPT window {a.cfg['zupt_window']} "
-                         "samples, alignment speeds and window, initial sigmas)")
+    status = navigator.configure(state, ctypes.byref(struct))
+    if status:
+        raise configuration_error(config, a.cfg, status, navigator.rest_max, navigator.window_max)
     buffers = counts = None
     if record:
-        buffers = RecordBuffers.sized(a, navigator.spec.n_states)
+        buffers = RecordBuffers.sized(a, navigator.spec.n_states, n_carried=len(navigator.spec.carried))
         counts = buffers.structure()
         if navigator.set_record(state, ctypes.byref(counts)):
             raise ModelError("smoother: the C navigator refused the forward record's buffers")
@@ -553,5 +616,3 @@ def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator, record
     return flight, cpu
 
 
-#: NAV_ERR_RECORD_FULL of the navigator header.
-RECORD_FULL = 15

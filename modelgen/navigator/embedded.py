@@ -31,7 +31,7 @@ from modelgen.codegen.generate import generate_code, harness_folder
 from modelgen.codegen.options import CodegenOptions
 from modelgen.errors import ModelError
 from modelgen.navigator import cconfig
-from modelgen.navigator.cnav import N_OUTPUT, REST_MAX, LogArrays, render_navigator, rest_define
+from modelgen.navigator.cnav import N_OUTPUT, REST_MAX, WINDOW_MAX, LogArrays, capacity_defines, render_navigator
 from modelgen.navigator.spec import NavigatorSpec
 
 MAX_IMU, MAX_EPOCHS, MAX_AID = 60000, 2500, 60000
@@ -84,16 +84,19 @@ def encode(a: LogArrays) -> bytes:
 
 
 def cortex_m4f_build(folder: Path, name: str, out_dir: Path,
-                     rest_max: int = REST_MAX) -> tuple[toolchain.SectionSizes, dict[str, int], list[str]]:
+                     rest_max: int = REST_MAX,
+                     window_max: int = WINDOW_MAX) -> tuple[toolchain.SectionSizes, dict[str, int], list[str]]:
     """Compile filter and navigator for the Cortex-M4F: sizes, worst-case stack of the two calls, heap symbols.
 
-    ``rest_max``: the alignment ring the configuration needs (:func:`modelgen.navigator.cnav.rest_capacity`), passed
-    as ``-D<P>_NAV_REST_MAX`` as to the host build, so that the sizes are those of the navigator that flies.
+    ``rest_max``, ``window_max``: the alignment ring and detector window the configuration needs
+    (:func:`modelgen.navigator.cnav.rest_capacity`, :func:`~modelgen.navigator.cnav.window_capacity`), passed as
+    ``-D<P>_NAV_REST_MAX`` and ``-D<P>_NAV_WINDOW_MAX`` as to the host build, so that the sizes are those of the
+    navigator that flies.
     """
     objects = []
     for source in (f"{name}.c", f"{name}_navigator.c"):
         obj = out_dir / source.replace(".c", ".o")
-        toolchain.run([toolchain.ARM_EMBEDDED_CC, *STRICT_FLAGS, *CORTEX_M4F_COMMON, rest_define(name, rest_max),
+        toolchain.run([toolchain.ARM_EMBEDDED_CC, *STRICT_FLAGS, *CORTEX_M4F_COMMON, *capacity_defines(name, rest_max, window_max),
                        "-I", str(folder), "-c", "-o",
                        str(obj), str(folder / source)], f"Cortex-M4F compile of {source}")
         objects.append(obj)
@@ -114,20 +117,28 @@ def embedded_replay(spec: NavigatorSpec, arrays: LogArrays, reference: np.ndarra
     missing = toolchain.missing_tools(toolchain.ARM_EMBEDDED_CC, toolchain.ARM_LINUX_CC, toolchain.QEMU_ARM)
     if missing:
         raise ModelError(f"embedded replay needs {', '.join(missing)}")
+    from modelgen.navigator.cnav import capacities
     from modelgen.navigator.mechanization import radii
+
+    built = capacities(arrays.rest_max, arrays.window_max)  # the buffers this build gets
+    refused = cconfig.check(arrays.cfg, built)  # the C's own check, before a build
+    if refused is not None:
+        raise ModelError(f"embedded replay: the C navigator refuses its configuration field {refused.name} = "
+                         f"{arrays.cfg[refused.name]!r}: it must be {cconfig.describe(refused, built)}")
 
     with tempfile.TemporaryDirectory(prefix="modelgen-nav-arm-") as work:
         folder, build = Path(work) / "src", Path(work) / "m4"
         build.mkdir()
         name = write_sources(spec, folder)
-        sizes, worst, forbidden = cortex_m4f_build(folder, name, build, arrays.rest_max)
+        sizes, worst, forbidden = cortex_m4f_build(folder, name, build, arrays.rest_max, arrays.window_max)
         exe = Path(work) / "navigator_arm"
-        toolchain.run([toolchain.ARM_LINUX_CC, *STRICT_FLAGS, "-O2", "-static", rest_define(name, arrays.rest_max),
+        toolchain.run([toolchain.ARM_LINUX_CC, *STRICT_FLAGS, "-O2", "-static",
+                       *capacity_defines(name, arrays.rest_max, arrays.window_max),
                        "-I", str(folder), "-o", str(exe),
                        str(folder / f"{name}.c"), str(folder / f"{name}_navigator.c"),
                        str(folder / "navigator_driver.c"), "-lm"], "arm-linux-gnueabihf build of the navigator")
         result = toolchain.run_driver(exe, [], stdin=encode(arrays), qemu=True, timeout=600.0)
-        struct_size = _struct_size(folder, name, Path(work), arrays.rest_max)
+        struct_size = _struct_size(folder, name, Path(work), arrays.rest_max, arrays.window_max)
     out = np.frombuffer(result.stdout, dtype="<f8")
     if out.size != N_OUTPUT * len(arrays.t_gnss):
         raise ModelError(f"embedded replay: the driver wrote {out.size} values, expected {N_OUTPUT * len(arrays.t_gnss)}")
@@ -145,12 +156,12 @@ def embedded_replay(spec: NavigatorSpec, arrays: LogArrays, reference: np.ndarra
                           [float(distance[i]) for i in (outage_ends or [])])
 
 
-def _struct_size(folder: Path, name: str, work: Path, rest_max: int = REST_MAX) -> int:
+def _struct_size(folder: Path, name: str, work: Path, rest_max: int = REST_MAX, window_max: int = WINDOW_MAX) -> int:
     """sizeof the navigator struct on the Cortex-M4F (float filter), from a compile-time constant in an object."""
     probe = work / "probe.c"
     probe.write_text(f'#include "{name}_navigator.h"\nconst unsigned long navigator_bytes = sizeof({name}_navigator);\n')
     obj = work / "probe.o"
-    toolchain.run([toolchain.ARM_EMBEDDED_CC, *toolchain.CORTEX_M4F_FLAGS, "-std=c99", rest_define(name, rest_max),
+    toolchain.run([toolchain.ARM_EMBEDDED_CC, *toolchain.CORTEX_M4F_FLAGS, "-std=c99", *capacity_defines(name, rest_max, window_max),
                    "-I", str(folder), "-c", "-o",
                    str(obj), str(probe)], "struct size probe")
     out = toolchain.run(["arm-none-eabi-objdump", "-s", "-j", ".rodata", str(obj)], "objdump").stdout.decode()

@@ -60,6 +60,7 @@ class ErrorStateFilter:
         self.module = module
         self.P = np.array(P0, float)
         self.x = np.zeros(len(self.P))
+        self.Phi = None  # the last covariance step's transition (predict)
         self.recorder = None  # a smoother's ForwardRecord (modelgen.navigator.smoother), or None
         #: called as monitor(source, time, nu, S, r, nis) at every update tried (modelgen.navigator.tuning), or None
         self.monitor = None
@@ -69,6 +70,7 @@ class ErrorStateFilter:
         g = self.module
         Phi, Qd = g.discretize(g.system_matrix(p), g.noise_input_matrix(p), g.noise_psd(p), period)
         self.x, self.P = g.predict(self.x, self.P, Phi, Qd)
+        self.Phi = Phi  # the step's transition (the navigator propagates its carried estimates with it)
         if self.recorder is not None:
             self.recorder.predicted(Phi, self.P)
 

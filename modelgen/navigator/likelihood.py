@@ -61,6 +61,12 @@ PROCESS_NOISE = PARAMETERS[:1]
 _TIED = {"noise.gyro_white.factor": ("gyro_white", "accel_white")}
 
 
+def information_criteria(log_l: float, k: int, n: int) -> dict[str, float]:
+    """AIC = 2 k - 2 log L and BIC = k ln n - 2 log L of a fit with k estimated parameters on n updates."""
+    return {"log_likelihood": float(log_l), "parameters": int(k), "updates": int(n),
+            "aic": 2.0 * k - 2.0 * float(log_l), "bic": k * math.log(n) - 2.0 * float(log_l)}
+
+
 def log_likelihood(sources: dict[str, Innovations]) -> dict[str, float]:
     """The innovations' Gaussian log-likelihood per sensor and in total: -1/2 sum(log det 2 pi S + nu^T S^-1 nu)."""
     out = {}
@@ -75,19 +81,37 @@ def log_likelihood(sources: dict[str, Innovations]) -> dict[str, float]:
     return out
 
 
-def parameter_value(config: NavigatorConfig, key: str) -> float:
-    """The configured value of one :data:`PARAMETERS` key."""
+#: the prefix of a model's free parameter as a key (``parameters.gnss_error_time``: the configuration's
+#: parameters: entry, else the model's default given to parameter_value)
+MODEL_PARAMETER = "parameters."
+
+
+def parameter_value(config: NavigatorConfig, key: str, defaults: dict[str, float] | None = None) -> float:
+    """The configured value of one :data:`PARAMETERS` key, or of a model parameter ``parameters.<name>``."""
+    if key.startswith(MODEL_PARAMETER):
+        name = key[len(MODEL_PARAMETER):]
+        given = dict(config.parameters or {})
+        if name in given:
+            return float(given[name])
+        if defaults and name in defaults:
+            return float(defaults[name])
+        raise KeyError(f"{key}: not set by the configuration's parameters: (and no default given)")
     if key.startswith("noise."):
         return config.noise[key.split(".")[1]].factor
     return float(getattr(config, CONFIG_FIELDS[key]))
 
 
 def with_parameters(config: NavigatorConfig, values: dict[str, float]) -> NavigatorConfig:
-    """The configuration with the named :data:`PARAMETERS` keys set (a noise factor also moves its SI value)."""
+    """The configuration with the named :data:`PARAMETERS` keys set (a noise factor also moves its SI value); a
+    ``parameters.<name>`` key sets that model parameter in the configuration's parameters:."""
     noise = dict(config.noise)
     fields = {}
+    model_parameters = dict(config.parameters or {})
     for key, value in values.items():
-        if key.startswith("noise."):
+        if key.startswith(MODEL_PARAMETER):
+            model_parameters[key[len(MODEL_PARAMETER):]] = float(value)
+            fields["parameters"] = model_parameters
+        elif key.startswith("noise."):
             for kind in _TIED.get(key, (key.split(".")[1],)):
                 entry = noise[kind]
                 noise[kind] = dataclasses.replace(entry, factor=value, si=entry.si / entry.factor * value)
@@ -126,6 +150,8 @@ def maximum_likelihood(config: NavigatorConfig, innovations: Callable[[Navigator
     ``max_flights`` flights.
     """
     start = {key: parameter_value(config, key) for key in keys}
+    if any(v <= 0 for v in start.values()):
+        raise ValueError(f"maximum_likelihood: the search is over log10 of positive values ({start})")
     cache: dict[tuple[float, ...], dict[str, float]] = {}
 
     def flown(log10: np.ndarray) -> dict[str, float]:
@@ -148,5 +174,7 @@ def maximum_likelihood(config: NavigatorConfig, innovations: Callable[[Navigator
                                "maxfev": max_flights})
     after = {key: start[key] * 10.0 ** float(v) for key, v in zip(keys, result.x)}
     held = {key: parameter_value(config, key) for key in PARAMETERS if key not in keys}
+    held.update({f"{MODEL_PARAMETER}{k}": float(v) for k, v in (config.parameters or {}).items()
+                 if f"{MODEL_PARAMETER}{k}" not in keys})
     return Estimate(start, after, held, flown(x0), flown(result.x), len(cache), bool(result.success),
                     str(result.message))

@@ -20,6 +20,7 @@ from modelgen.errors import ModelError
 from modelgen.navigator.alignment import Alignment, align  # noqa: F401  (the alignment lives in alignment.py)
 from modelgen.navigator.config import NavigatorConfig
 from modelgen.navigator import cconfig
+from modelgen.navigator.cconfig_fields import WINDOW_SAMPLES_MIN
 from modelgen.navigator import ecef
 from modelgen.navigator.errorstate import ErrorStateFilter, rotate
 from modelgen.navigator.logs import GnssLog, ImuLog, ScalarLog, check_logs, epochs_inside_gaps, read_scalar
@@ -123,7 +124,7 @@ def read_aiding_logs(config: NavigatorConfig) -> dict[str, ScalarLog]:
 def stationary_mask(time: np.ndarray, force: np.ndarray, rate: np.ndarray, gyro_bias: np.ndarray,
                     window: float, gyro_max: float, accel_std_max: float) -> np.ndarray:
     """Per sample: the window of ``window`` seconds ending there is still (causal, IMU only)."""
-    n = max(2, int(round(window / float(np.median(np.diff(time))))))
+    n = max(WINDOW_SAMPLES_MIN, int(round(window / float(np.median(np.diff(time))))))
     rate_norm = np.linalg.norm(rate - gyro_bias, axis=1)
     force_norm = np.linalg.norm(force, axis=1)
     still = np.zeros(len(time), dtype=bool)
@@ -247,7 +248,8 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
     if spec.ecef:  # the alignment is geodetic/NED; an ecef model flies r^e, v^e, C_b^e
         nav = ecef.state_from_ned(nav)
     sensors = {"gyro_bias": np.array(start.gyro_bias, float), "accel_bias": np.array(start.accel_bias, float),
-               "gyro_scale_factor": np.zeros(3), "accel_scale_factor": np.zeros(3)}
+               "gyro_scale_factor": np.zeros(3), "accel_scale_factor": np.zeros(3),
+               "carried": np.zeros(len(spec.carried))}  # an aiding sensor's own error (NavigatorSpec.carried)
     gyro_bias, accel_bias = sensors["gyro_bias"], sensors["accel_bias"]  # updated in place by the feedback
     gyro_scale, accel_scale = sensors["gyro_scale_factor"], sensors["accel_scale_factor"]
     module = spec.module
@@ -255,21 +257,33 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
     step = max(1, int(round(config.predict_period / median_dt)))
     from modelgen.navigator.alignment import still_window_samples
 
-    cfg = cconfig.namespace(cconfig.values(config, spec, max(2, int(round(config.zupt_window / median_dt))), step,
-                                           still_window_samples(config, time), table))
+    values = cconfig.values(config, spec, max(WINDOW_SAMPLES_MIN, int(round(config.zupt_window / median_dt))), step,
+                            still_window_samples(config, time), table)
+    # the C navigator's own configuration check (cconfig.bounds), so that both refuse the same configurations; its
+    # buffers' capacities are the C's alone (the alignment ring and the detector window are sized from the
+    # configuration and the log: cnav.rest_capacity, cnav.window_capacity), so they bound nothing here
+    refused = cconfig.check(values, {})
+    if refused is not None:
+        raise cconfig.refusal(config.path, refused, values[refused.name], {}, "Python")
+    cfg = cconfig.namespace(values)
     speed0 = float(np.hypot(g.velocity[j0, 0], g.velocity[j0, 1]))
     sv = float(np.hypot(g.sigma_velocity[j0, 0], g.sigma_velocity[j0, 1]))
     heading_sigma = math.hypot(math.atan2(sv, speed0), config.heading_extra_sigma)
-    kf = ErrorStateFilter(module, spec.initial_covariance(config, nav, heading_sigma, radii))
-    if record is not None:
-        record.start(kf.P, partial(_apply_correction, spec))
-    kf.recorder = record
-    kf.monitor = monitor
-
     def parameters(force_ned: np.ndarray, sig: np.ndarray) -> np.ndarray:
         c_bn = quaternion_to_dcm(nav[0], nav[1], nav[2], nav[3])
         return spec.parameter_vector(quantities(spec, nav, c_bn, force_ned, corrected(rate[k], gyro_bias, gyro_scale),
                                                 sig, cfg, radii, gravity))
+
+    initial = spec.initial_covariance(config, nav, heading_sigma, radii)
+    if spec.carried:  # their steady state, from the model at the first epoch's sigmas (the force plays no part)
+        first_sigmas = _gnss_sigmas(config, g, j0)
+        initial = spec.carried_covariance(initial, parameters(np.zeros(3), np.ones(6) if first_sigmas is None
+                                                              else first_sigmas))
+    kf = ErrorStateFilter(module, initial)
+    if record is not None:
+        record.start(kf.P, partial(_apply_correction, spec))
+    kf.recorder = record
+    kf.monitor = monitor
 
     still = (stationary_mask(time, force, rate, gyro_bias, config.zupt_window, config.zupt_gyro_max,
                              config.zupt_accel_std_max) if config.zupt_enabled else np.zeros(len(time), bool))
@@ -301,6 +315,7 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
             period = time[stop] - time[k]
             k = stop
             kf.predict(parameters(mean_force[0:3] / mean_force[3], last_sigmas), period)
+            spec.propagate_carried(sensors, kf.Phi)
             counts["predicts"] += 1
             _remember(velocity_history, time[k], nav)
             _aid_step(step_sensors, time[k], nav, kf, spec, sensors, cfg, gates, deweight, counts,
@@ -320,6 +335,7 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
             dv, dp = measurement(nav, lever, corrected(rate[k], gyro_bias, gyro_scale), g, j, time[k], delayed)
             z, r = spec.gnss_z(dv, dp, sigmas)
             H = module.measurement_matrix(parameters(mean_force[0:3] / max(mean_force[3], 1e-9), sigmas))
+            z = z - spec.carried_correction(H, sensors)  # measured = true + e: the carried estimate's share
             if spec.ecef:  # the e-frame rows turned along NED, where the receiver's sigmas are
                 T, sigma_index = spec.gnss_rotation(ecef.ned_to_ecef(*ecef.geodetic(nav[7:10])[:2]))
                 z, H, r = T @ z, T @ H, np.square(sigmas[sigma_index])

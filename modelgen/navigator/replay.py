@@ -10,7 +10,7 @@ from typing import Callable
 import numpy as np
 
 from modelgen.errors import ModelError
-from modelgen.navigator.cnav import GeneratedC, cached_c_navigator, fly_c, rest_capacity
+from modelgen.navigator.cnav import GeneratedC, cached_c_navigator, fly_c, rest_capacity, window_capacity
 from modelgen.navigator.alignment import alignment_note
 from modelgen.navigator.config import NavigatorConfig, load_config
 from modelgen.navigator.errorstate import model_path
@@ -109,7 +109,8 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
         timings["fly_python_s"] = time.perf_counter() - mark
     if navigator in ("c", "both"):
         mark = time.perf_counter()
-        compiled, cached = cached_c_navigator(spec, echo, rest_capacity(config, inputs.time))
+        compiled, cached = cached_c_navigator(spec, echo, rest_capacity(config, inputs.time),
+                                              window_capacity(config, inputs.time))
         timings["generate_compile_c_s"] = 0.0 if cached else time.perf_counter() - mark
         mark = time.perf_counter()
         echo("  flying (C)")

@@ -47,6 +47,7 @@ from typing import Callable
 import numpy as np
 
 from modelgen.navigator.cconfig_fields import Field
+from modelgen.navigator.config import DEG
 
 #: measurement forms: what each builds from the spec's blocks
 FORMS = {
@@ -120,32 +121,34 @@ GNSS = AidingSensor(
 ZUPT = AidingSensor(
     "zupt", "zupt", "imu", "velocity", ("cfg->zupt_sigma",) * 3, "still && speed < cfg->zupt_speed_max",
     "zupt_enabled", "zero-velocity update: the IMU detector says still and the navigator is slow", group="motion",
-    fields=(Field("zupt_enabled", "int", 1, "zero-velocity updates on (1) or off (0)"),
-            Field("zupt_speed_max", "double", 1, "ZUPT only below this navigator speed [m/s]"),
-            Field("zupt_sigma", "double", 1, "ZUPT sigma [m/s]")),
+    fields=(Field("zupt_enabled", "int", 1, "zero-velocity updates on (1) or off (0)", key="zupt.enabled"),
+            Field("zupt_speed_max", "double", 1, "ZUPT only below this navigator speed [m/s]", key="zupt.speed_max_m_s"),
+            Field("zupt_sigma", "double", 1, "ZUPT sigma [m/s]", key="zupt.sigma_m_s")),
     values=_zupt_values)
 NHC = AidingSensor(
     "nhc", "nhc", "imu", "body_velocity", ("cfg->nhc_sigma_lateral", "cfg->nhc_sigma_vertical"),
     "speed > cfg->nhc_speed_min && rate_norm < cfg->nhc_rate_max", "nhc_enabled",
     "non-holonomic constraint: no lateral or vertical body velocity", axes=(1, 2), group="motion",
-    fields=(Field("nhc_enabled", "int", 1, "non-holonomic constraint on (1) or off (0)"),
-            Field("nhc_speed_min", "double", 1, "NHC only above this speed [m/s]"),
-            Field("nhc_sigma_lateral", "double", 1, "NHC lateral sigma [m/s]"),
-            Field("nhc_sigma_vertical", "double", 1, "NHC vertical sigma [m/s]"),
-            Field("nhc_rate_max", "double", 1, "NHC only below this bias-corrected angular rate [rad/s]")),
+    fields=(Field("nhc_enabled", "int", 1, "non-holonomic constraint on (1) or off (0)", key="nhc.enabled"),
+            Field("nhc_speed_min", "double", 1, "NHC only above this speed [m/s]", key="nhc.speed_min_m_s"),
+            Field("nhc_sigma_lateral", "double", 1, "NHC lateral sigma [m/s]", key="nhc.sigma_lateral_m_s"),
+            Field("nhc_sigma_vertical", "double", 1, "NHC vertical sigma [m/s]", key="nhc.sigma_vertical_m_s"),
+            Field("nhc_rate_max", "double", 1, "NHC only below this bias-corrected angular rate [rad/s]",
+                  key="nhc.rate_max_deg_s", scale=DEG)),
     values=_nhc_values)
 ODOMETER = AidingSensor(
     "odometer", "odometer", "odometer", "body_velocity", ("cfg->odometer_sigma",), "fresh", "odometer_enabled",
     "wheel speed along body x at the wheel's lever arm", axes=(0,), lever_arm="odometer_lever_arm",
-    fields=(Field("odometer_enabled", "int", 1, "odometer updates on (1) or off (0)"),
-            Field("odometer_sigma", "double", 1, "odometer speed sigma [m/s]"),
-            Field("odometer_lever_arm", "double", 3, "IMU to the odometer's wheel contact in body axes [m]")),
+    fields=(Field("odometer_enabled", "int", 1, "odometer updates on (1) or off (0)", key="odometer.enabled"),
+            Field("odometer_sigma", "double", 1, "odometer speed sigma [m/s]", key="odometer.sigma_m_s"),
+            Field("odometer_lever_arm", "double", 3, "IMU to the odometer's wheel contact in body axes [m]",
+                  key="odometer.lever_arm_m")),
     values=stream_values("odometer", lever_arm=True))
 BAROMETER = AidingSensor(
     "barometer", "barometer", "barometer", "height", ("cfg->barometer_sigma",), "fresh", "barometer_enabled",
     "barometric height (on the navigator's height)",
-    fields=(Field("barometer_enabled", "int", 1, "barometer updates on (1) or off (0)"),
-            Field("barometer_sigma", "double", 1, "barometric height sigma [m]")),
+    fields=(Field("barometer_enabled", "int", 1, "barometer updates on (1) or off (0)", key="barometer.enabled"),
+            Field("barometer_sigma", "double", 1, "barometric height sigma [m]", key="barometer.sigma_m")),
     values=stream_values("barometer"))
 
 #: every aiding sensor, in the order a covariance step tries them (the GNSS epochs come on their own)

@@ -23,6 +23,13 @@ from them:
   a velocity difference (INS minus GNSS) along one axis, found from which
   position or velocity state it depends on; its H is the model's generated H
   (a lever arm in the model is a model parameter, set from the configuration);
+* the carried states (:attr:`NavigatorSpec.carried`): an aiding sensor's own error declared in the model
+  file (``measurements: - bias: {process: gauss_markov, ...}``, e.g. the GNSS receiver's time-correlated
+  position error, a shaping filter).  It is not the INS's error, so it is not fed back into the
+  mechanization: the navigator keeps its estimate ``sensors["carried"]``, which the feedback corrects
+  (+= x, then x = 0 as for every state), the covariance step propagates by the model's own transition
+  (the block of Phi), and the GNSS update subtracts from its differences (z - H_c e: measured = true + e).
+  Its P0 is the process's steady state, Q_ii / (2 a_i) from the model's F_ii = -a_i and its noise;
 * the model's parameters at the operating point, from one table of expressions
   (:data:`QUANTITIES`) that are valid C and, with ``->`` read as ``.``, Python,
   so that the C navigator's parameter code and the Python navigator's cannot
@@ -149,6 +156,8 @@ class NavigatorSpec:
     rates_python: str = ""
     rates_c: str = ""
     rates: object = None
+    #: the carried states' indices (module docstring): an aiding sensor's own error, estimated but not fed back
+    carried: tuple[int, ...] = ()
     _code: object = field(default=None, repr=False)
 
     @property
@@ -311,6 +320,40 @@ class NavigatorSpec:
         for kind in SENSOR_BLOCKS:
             if kind in self.blocks:
                 sensors[kind] += self.blocks[kind].ned(x)
+        if self.carried:
+            sensors["carried"] += x[list(self.carried)]
+
+    # -- carried states ----------------------------------------------------------------------
+    def carried_covariance(self, P: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """P0 with the carried states' steady-state variances Q_ii / (2 a_i) (F_ii = -a_i, Q = G diag(q) G^T).
+
+        Refused if a carried state's process is not stable at these parameters (a random constant or walk has no
+        steady state to start from)."""
+        if not self.carried:
+            return P
+        g = self.module
+        F, G, q = g.system_matrix(p), g.noise_input_matrix(p), np.asarray(g.noise_psd(p), float)
+        P = P.copy()
+        names = self.derived.model.state_names
+        for i in self.carried:
+            a = -float(F[i, i])
+            if not a > 0.0:
+                raise ModelError(f"{self.model_file}: state {names[i]!r} (an aiding sensor's own error) has no steady "
+                                 f"state to start from (d/dt = {-a:g} x): declare it gauss_markov with a positive rate")
+            P[i, i] = float(np.sum(np.square(G[i]) * q)) / (2.0 * a)
+        return P
+
+    def propagate_carried(self, sensors: dict[str, np.ndarray], Phi: np.ndarray) -> None:
+        """The carried estimate over a covariance step: e <- Phi_cc e (the model's own transition, in place)."""
+        if self.carried:
+            c = list(self.carried)
+            sensors["carried"][:] = Phi[np.ix_(c, c)] @ sensors["carried"]
+
+    def carried_correction(self, H: np.ndarray, sensors: dict[str, np.ndarray]) -> np.ndarray:
+        """What the carried estimate adds to the rows' differences: H_c e (z - H_c e is the update's z)."""
+        if not self.carried:
+            return np.zeros(len(H))
+        return H[:, list(self.carried)] @ sensors["carried"]
 
     # -- measurement rows --------------------------------------------------------------------
     def zupt_rows(self, v_ned: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -426,6 +469,31 @@ def _gnss_rows(derived, blocks: dict[str, Block], where: str) -> tuple[GnssRow, 
     return tuple(rows)
 
 
+def _carried(derived, blocks: dict[str, Block], where: str) -> tuple[int, ...]:
+    """The states outside every block: an aiding sensor's own error (module docstring), else refused.
+
+    Such a state must be decoupled from the others -- its rate depends on itself alone and no other state's rate
+    on it (F_ij = F_ji = 0, j != i), driven by its own noises only -- and must enter at least one GNSS row, so that
+    the navigator can carry its estimate (propagated by F_ii, subtracted in the GNSS rows) instead of feeding it
+    back.  The navigation notation makes ``measurements: - bias:`` states so."""
+    names = list(derived.model.state_names)
+    inside = {i for b in blocks.values() for i in b.indices}
+    F, G, H = derived.F, derived.G, derived.H
+    out = []
+    for i, name in enumerate(names):
+        if i in inside:
+            continue
+        coupled = [names[j] for j in range(len(names)) if j != i and (F[i, j] != 0 or F[j, i] != 0)]
+        shared = [k for k in range(G.shape[1]) if G[i, k] != 0 and any(G[j, k] != 0 for j in range(len(names)) if j != i)]
+        if coupled or shared or all(H[r, i] == 0 for r in range(H.shape[0])):
+            raise ModelError(f"{where}: the navigator cannot fly state {name!r}: it is neither a navigation or sensor "
+                             "error block state nor an aiding sensor's own error (a measurement's bias: that enters "
+                             "the GNSS rows and is coupled to no other state"
+                             + (f"; it is coupled to {', '.join(coupled)}" if coupled else "") + ")")
+        out.append(i)
+    return tuple(out)
+
+
 def navigator_spec(model_file: Path, with_python: bool = True) -> NavigatorSpec:
     """Derive the model file once and read the navigator's spec from it (and the generated Python filter)."""
     from modelgen.derivation.symbolic import derive
@@ -455,8 +523,10 @@ def spec_of(derived, model_file: Path, with_python: bool = True) -> NavigatorSpe
     rates = _rates(model, where)
     if frame == "ECEF":
         _check_ecef(model_file, blocks, rows)
+    carried = _carried(derived, blocks, where)
     spec = NavigatorSpec(model_file, derived, model.name, frame, len(names), blocks, rows, parameter_names,
-                         expressions, free, defaults, rates_python=python_source(rates), rates_c=c_source(rates))
+                         expressions, free, defaults, rates_python=python_source(rates), rates_c=c_source(rates),
+                         carried=carried)
     if with_python:
         from modelgen.navigator.mechanization import model_rates
 

@@ -160,6 +160,77 @@ def decorrelation_time(rho: np.ndarray, period: float) -> float:
     return math.inf
 
 
+def autocovariance(time: np.ndarray, x: np.ndarray, period: float, max_lag_s: float = MAX_LAG_S) -> np.ndarray:
+    """C_k, k = 0 .. max lag, of a series sampled at ``time``: mean of x_t x_{t+k} over the pairs exactly k periods
+    apart (not demeaned, as :func:`autocorrelation`); NaN where a lag has fewer than 10 pairs."""
+    time = np.asarray(time, float)
+    x = np.asarray(x, float)
+    steps = np.round((time - time[0]) / period).astype(np.int64)
+    on_grid = np.abs((time - time[0]) - steps * period) < 0.25 * period
+    steps, values = steps[on_grid], x[on_grid]
+    where = np.full(int(steps[-1]) + 1 if len(steps) else 0, -1, dtype=np.int64)
+    where[steps] = np.arange(len(steps))
+    out = np.full(int(round(max_lag_s / period)) + 1, np.nan)
+    for k in range(len(out)):
+        partner = np.where(steps + k < len(where), where[np.minimum(steps + k, len(where) - 1)], -1)
+        ok = partner >= 0
+        if ok.sum() >= 10:
+            out[k] = float(np.mean(values[ok] * values[partner[ok]]))
+    return out
+
+
+@dataclass(frozen=True)
+class MarkovFit:
+    """A first-order Gauss-Markov error fitted to an autocovariance: C_k = sigma^2 exp(-k T / tau), k >= 1."""
+
+    tau_s: float
+    sigma: float
+    lags: int  # lags used (1 .. lags)
+    white_sigma: float  # sqrt(C_0 - sigma^2): the rest of the lag-0 variance (white, and the filter's own share)
+
+
+def markov_fit(cov: np.ndarray, period: float, floor: float = 0.1) -> MarkovFit:
+    """Fit log C_k = log sigma^2 - k T / tau by least squares over k = 1 .. K, K the last lag before C_k first falls
+    below ``floor`` x C_1 (or is not positive).  Lag 0 is left out: it holds the white noise too.
+
+    The starting point of the shaping filter's identification (:func:`markov_start`); the estimate itself is the
+    likelihood's (:func:`modelgen.navigator.likelihood.maximum_likelihood`)."""
+    cov = np.asarray(cov, float)
+    lags = []
+    for k in range(1, len(cov)):
+        if not (math.isfinite(cov[k]) and cov[k] > 0.0 and cov[k] >= floor * cov[1]):
+            break
+        lags.append(k)
+    if len(lags) < 2:
+        raise ValueError("markov_fit: the autocovariance is not positive over two lags (no correlated error to fit)")
+    k = np.array(lags, float)
+    slope, intercept = np.polyfit(k * period, np.log(cov[lags]), 1)
+    if not slope < 0.0:
+        raise ValueError("markov_fit: the autocovariance does not decay")
+    sigma2 = math.exp(intercept)
+    return MarkovFit(-1.0 / slope, math.sqrt(sigma2), len(lags), math.sqrt(max(float(cov[0]) - sigma2, 0.0)))
+
+
+def markov_start(sources: dict[str, Innovations], spec, kind: str = "position") -> dict:
+    """The Gauss-Markov fit of each GNSS ``kind`` row's innovations (metres) and of their mean autocovariance.
+
+    ``sources``: a flight's innovations with GNSS present, flown with that row's noise white (R not inflated).
+    Returns {"rows": {label: MarkovFit}, "pooled": MarkovFit, "period_s": T}."""
+    entry = sources["gnss"]
+    time = np.array(entry.time)
+    period = update_period(time)
+    nu = np.array(entry.nu, float)
+    axes = ("north", "east", "down")
+    rows, covs = {}, []
+    for i, r in enumerate(spec.gnss_rows):
+        if r.kind != kind:
+            continue
+        cov = autocovariance(time, nu[:, i], period)
+        covs.append(cov)
+        rows[f"{kind} {axes[r.axis]}"] = markov_fit(cov, period)
+    return {"rows": rows, "pooled": markov_fit(np.mean(covs, axis=0), period), "period_s": period}
+
+
 @dataclass(frozen=True)
 class RowStatistic:
     """One innovation row's whiteness: its update period, tau, correlation factor and the lags summed."""

@@ -203,8 +203,8 @@ def test_a_c_record_too_small_for_the_log_stops_the_flight(excerpt_records, monk
 
     sized = cnav.RecordBuffers.sized
 
-    def small(arrays, n, table=cnav.SENSORS):
-        full = sized(arrays, n, table)
+    def small(arrays, n, table=cnav.SENSORS, **sizes):
+        full = sized(arrays, n, table, **sizes)
         return cnav.RecordBuffers(full.Phi[:100], full.P_prior[:100], full.P_post[:100], full.correction_start[:101],
                                   full.corrections, full.nominal, full.output_step, full.output_corrections_before)
 
