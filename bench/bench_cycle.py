@@ -24,8 +24,9 @@ point and covariance:
     text, read by symengine) and generate that one function symbolically, P packed upper in and
     out.  modelgen's side is its generated matrices_evaluate + discretize +
     predict (default options: full symmetric storage, computed once per
-    pair), which also computes ||F||_D (D fixed at generation time) and chooses the order at run time
-    (modelgen.derivation.discretization.taylor_plan): the order the competitors get is
+    pair), which also computes ||F||_D (D fixed at generation time, F rebalanced at run time when
+    that plan needs a doubling) and chooses the order and doublings at run time
+    (modelgen.derivation.discretization.step_plan): the order and doublings the competitors get are
     the one that rule picks at that T (T = 60 s: 9, the paper's; T = 1 s: 5 for the
     paper's model), so both sides sum the same series;
 (c) the measurement update (vector update, Joseph form; the tools: the
@@ -84,10 +85,9 @@ from modelgen.codegen.options import CodegenOptions  # noqa: E402
 from modelgen.derivation import reference  # noqa: E402
 from modelgen.derivation.discretization import (  # noqa: E402
     DEFAULT_TOLERANCE,
-    balanced_norm,
     nominal_scaling,
+    step_plan,
     taylor_discretization,
-    taylor_plan,
     taylor_process_noise,
 )
 from modelgen.derivation.symbolic import DerivedModel, derive  # noqa: E402
@@ -384,7 +384,7 @@ def run_model(name: str, root: Path, sf_python: Path | None, symforce_max: int) 
         bc.symforce_codegen(sf_python, sp_, work / "symforce")
         builds["symforce"] = bc.build_harness(_fresh(work, "a-symforce"), bc.glue_symforce(sp_), [], p, cxx=True,
                                               includes=(work / "symforce", bc.EIGEN))
-    norm = balanced_norm(p["F"], nominal_scaling(p["derived"]))  # the D the generated code bakes in
+    scaling = nominal_scaling(p["derived"])  # the D the generated code bakes in (rebalanced when a doubling is at stake)
     for part, what in (("a", "predict"), ("c", "update")):
         floor = floors(p, 9, 0)[part]
         for impl, exe in builds.items():
@@ -394,7 +394,7 @@ def run_model(name: str, root: Path, sf_python: Path | None, symforce_max: int) 
 
     # (b) the full cycle at two steps
     for T, label in p["steps"]:
-        halvings, order = taylor_plan(norm, T, 9, DEFAULT_TOLERANCE)
+        halvings, order = step_plan(p["F"], T, 9, DEFAULT_TOLERANCE, scaling)  # what the generated code chooses at run time
         floor = floors(p, order, halvings)["b"]
         exes = {"modelgen": bc.build_harness(_fresh(work, f"b-modelgen-{T}"), glue_generated_cycle(p, T), [gen / f"{model}.c"], p,
                                              includes=(gen,)),

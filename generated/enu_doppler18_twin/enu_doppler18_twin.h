@@ -194,6 +194,10 @@ typedef struct {
     enu_doppler18_twin_scalar S[ENU_DOPPLER18_TWIN_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)!
             (and the even levels R_k): each block row's dense segment, then the diagonal rows */
     enu_doppler18_twin_scalar fh[ENU_DOPPLER18_TWIN_NNZ_F]; /* F h at the nonzeros of F */
+    enu_doppler18_twin_scalar row_sum[ENU_DOPPLER18_TWIN_N_STATES]; /* balancing: off-diagonal row
+            sums of D^-1 |F| D */
+    enu_doppler18_twin_scalar col_sum[ENU_DOPPLER18_TWIN_N_STATES]; /* balancing: off-diagonal
+            column sums of D^-1 |F| D */
 } enu_doppler18_twin_discretize_scratch;
 
 /* Scratch memory of predict, update and set_covariance. */

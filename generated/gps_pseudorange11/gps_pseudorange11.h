@@ -200,6 +200,10 @@ typedef struct {
     gps_pseudorange11_scalar S[GPS_PSEUDORANGE11_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)!
             (and the even levels R_k): each block row's dense segment, then the diagonal rows */
     gps_pseudorange11_scalar fh[GPS_PSEUDORANGE11_NNZ_F]; /* F h at the nonzeros of F */
+    gps_pseudorange11_scalar row_sum[GPS_PSEUDORANGE11_N_STATES]; /* balancing: off-diagonal row
+            sums of D^-1 |F| D */
+    gps_pseudorange11_scalar col_sum[GPS_PSEUDORANGE11_N_STATES]; /* balancing: off-diagonal column
+            sums of D^-1 |F| D */
 } gps_pseudorange11_discretize_scratch;
 
 /* Scratch memory of predict, update and set_covariance. */

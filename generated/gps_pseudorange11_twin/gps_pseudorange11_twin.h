@@ -208,6 +208,10 @@ typedef struct {
             (k + 1)! (and the even levels R_k): each block row's dense segment, then the diagonal
             rows */
     gps_pseudorange11_twin_scalar fh[GPS_PSEUDORANGE11_TWIN_NNZ_F]; /* F h at the nonzeros of F */
+    gps_pseudorange11_twin_scalar row_sum[GPS_PSEUDORANGE11_TWIN_N_STATES]; /* balancing:
+            off-diagonal row sums of D^-1 |F| D */
+    gps_pseudorange11_twin_scalar col_sum[GPS_PSEUDORANGE11_TWIN_N_STATES]; /* balancing:
+            off-diagonal column sums of D^-1 |F| D */
 } gps_pseudorange11_twin_discretize_scratch;
 
 /* Scratch memory of predict, update and set_covariance. */

@@ -554,6 +554,7 @@ def matrices_evaluate(p):
 
 
 _BALANCE_FACTORS = np.array([1.0, 0.03125, 0.000244140625, 1.0, 0.03125, 0.000244140625, 32.0, 32.0, 0.001953125, 1.0, 0.25, 0.0001220703125, 0.00048828125, 1.1368683772161603e-13, 1.1368683772161603e-13, 1.1368683772161603e-13, 1.1368683772161603e-13, 1.1368683772161603e-13, 1.1368683772161603e-13, 1.0, 0.25, 0.0001220703125, 0.00048828125, 1.1368683772161603e-13, 1.1368683772161603e-13, 1.1368683772161603e-13, 1.1368683772161603e-13, 1.1368683772161603e-13, 1.1368683772161603e-13, 512.0, 4.0, 4.0, 0.00048828125, 0.00048828125, 4.547473508864641e-13, 4.547473508864641e-13, 4.547473508864641e-13, 4.547473508864641e-13, 4.547473508864641e-13, 4.547473508864641e-13, 8192.0, 1.0, 4.0, 9.313225746154785e-10, 9.313225746154785e-10, 9.313225746154785e-10, 9.313225746154785e-10, 9.313225746154785e-10, 9.313225746154785e-10, 8192.0, 1.0, 4.0, 9.313225746154785e-10, 9.313225746154785e-10, 9.313225746154785e-10, 9.313225746154785e-10, 9.313225746154785e-10, 9.313225746154785e-10, 2048.0, 0.25, 0.25, 2.3283064365386963e-10, 2.3283064365386963e-10, 2.3283064365386963e-10, 2.3283064365386963e-10, 2.3283064365386963e-10, 2.3283064365386963e-10, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0])  # d_j / d_i per nonzero of F
+_BALANCE_START = [15, 15, 10, 3, 3, 1, -10, -10, -8, -40, -40, -40, -40, -40, -40, -40, -40, -40, -40, -40, -40]  # the exponents of that D: where run-time rebalancing starts
 
 
 def _balanced_norm(F):
@@ -561,13 +562,47 @@ def _balanced_norm(F):
 
     D is Osborne's balancing of F at the model's check operating point
     (modelgen.derivation.discretization.nominal_scaling); any D gives a valid
-    bound, so one D serves every operating point.  The same sums, in the same
-    order, as the C discretize and modelgen.derivation.discretization.balanced_norm
-    with that scaling, so all three choose the same s and order.
+    bound.  The same sums, in the same order, as the C discretize and
+    modelgen.derivation.discretization.balanced_norm with that scaling, so all
+    three choose the same s and order; a plan on it that needs a doubling is
+    retaken on _rebalanced_norm (step_plan).
     """
     if not _F_ROWS.size:
         return 0.0
     return float(np.bincount(_F_ROWS, weights=np.abs(F[_F_ROWS, _F_COLS]) * _BALANCE_FACTORS, minlength=N_STATES).max())
+
+
+def _rebalanced_norm(F):
+    """||F||_D at the actual operating point: Osborne's sweeps from the fixed D (as the C discretize's rebalanced_norm)."""
+    return _swept_norm(F, _BALANCE_START)
+
+
+def _swept_norm(F, start):
+    """max_i sum_j |F_ij| d_j / d_i, D = 2^e from at most 8 Jacobi sweeps of Osborne's balancing in powers of two from e = start.
+
+    The same sums, in the same order (entry by entry, as bincount adds), as
+    the C discretize and modelgen.derivation.discretization.balancing_exponents
+    and scaled_norm, so all three choose the same s.  numpy: bincount over the entries.
+    """
+    if not _F_ROWS.size:
+        return 0.0
+    size = np.abs(F[_F_ROWS, _F_COLS])
+    off_size = size[_F_OFF]
+    exponent = np.array(start, dtype=np.int64)  # d = 2^exponent
+    for _ in range(8):
+        d = np.ldexp(1.0, exponent)
+        v = off_size * d[_F_OFF_COLS] / d[_F_OFF_ROWS]
+        row = np.bincount(_F_OFF_ROWS, weights=v, minlength=N_STATES)
+        column = np.bincount(_F_OFF_COLS, weights=v, minlength=N_STATES)
+        both = (row > 0.0) & (column > 0.0)
+        step = np.where(both, np.minimum(np.maximum((np.frexp(row)[1] - np.frexp(column)[1]) // 2, -8), 8), 0)
+        step = np.where(~both & (column > 0.0), -8, np.where(~both & (row > 0.0), 8, step))
+        new = np.minimum(np.maximum(exponent + step, -40), 40)
+        if np.array_equal(new, exponent):
+            break  # a fixed point: further sweeps change nothing
+        exponent = new
+    d = np.ldexp(1.0, exponent)
+    return float(np.bincount(_F_ROWS, weights=size * d[_F_COLS] / d[_F_ROWS], minlength=N_STATES).max())
 
 
 def _step_error_bound(theta, order, halvings):
@@ -637,7 +672,14 @@ def discretize(F, G, q, T):
     norm = _balanced_norm(F)
     if not math.isfinite(norm):
         _check_finite("discretize", F=F)
-    s, order = _taylor_plan(norm, T)
+    try:
+        s, order = _taylor_plan(norm, T)
+    except ValueError:  # beyond 64 doublings in the fixed D: F's own balancing may still reach it
+        s, order = 65, TAYLOR_ORDER
+    if s:  # a doubling at stake: the plan on F's own balancing at this operating point (step_plan)
+        rebalanced = _rebalanced_norm(F)
+        if rebalanced < norm or s > 64:
+            s, order = _taylor_plan(min(rebalanced, norm), T)
     h = math.ldexp(T, -s)
     Fh = F * h
     series = _IDENTITY / math.factorial(order + 1)  # Horner: R_k = I / (k+1)! + F h R_(k+1), S = R_0

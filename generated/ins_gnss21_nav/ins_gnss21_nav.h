@@ -222,6 +222,10 @@ typedef struct {
     ins_gnss21_nav_scalar S[INS_GNSS21_NAV_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! (and the
             even levels R_k): each block row's dense segment, then the diagonal rows */
     ins_gnss21_nav_scalar fh[INS_GNSS21_NAV_NNZ_F]; /* F h at the nonzeros of F */
+    ins_gnss21_nav_scalar row_sum[INS_GNSS21_NAV_N_STATES]; /* balancing: off-diagonal row sums of
+            D^-1 |F| D */
+    ins_gnss21_nav_scalar col_sum[INS_GNSS21_NAV_N_STATES]; /* balancing: off-diagonal column sums
+            of D^-1 |F| D */
 } ins_gnss21_nav_discretize_scratch;
 
 /* Scratch memory of predict, update and set_covariance. */

@@ -185,6 +185,10 @@ typedef struct {
     ins_gps15_twin_scalar S[INS_GPS15_TWIN_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! (and the
             even levels R_k): each block row's dense segment, then the diagonal rows */
     ins_gps15_twin_scalar fh[INS_GPS15_TWIN_NNZ_F]; /* F h at the nonzeros of F */
+    ins_gps15_twin_scalar row_sum[INS_GPS15_TWIN_N_STATES]; /* balancing: off-diagonal row sums of
+            D^-1 |F| D */
+    ins_gps15_twin_scalar col_sum[INS_GPS15_TWIN_N_STATES]; /* balancing: off-diagonal column sums
+            of D^-1 |F| D */
 } ins_gps15_twin_discretize_scratch;
 
 /* Scratch memory of predict, update and set_covariance. */

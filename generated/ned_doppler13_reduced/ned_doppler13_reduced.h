@@ -191,6 +191,10 @@ typedef struct {
             + 1)! (and the even levels R_k): each block row's dense segment, then the diagonal
             rows */
     ned_doppler13_reduced_scalar fh[NED_DOPPLER13_REDUCED_NNZ_F]; /* F h at the nonzeros of F */
+    ned_doppler13_reduced_scalar row_sum[NED_DOPPLER13_REDUCED_N_STATES]; /* balancing: off-diagonal
+            row sums of D^-1 |F| D */
+    ned_doppler13_reduced_scalar col_sum[NED_DOPPLER13_REDUCED_N_STATES]; /* balancing: off-diagonal
+            column sums of D^-1 |F| D */
 } ned_doppler13_reduced_discretize_scratch;
 
 /* Scratch memory of predict, update and set_covariance. */

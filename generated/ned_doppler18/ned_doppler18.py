@@ -360,6 +360,7 @@ def matrices_evaluate(p):
 
 
 _BALANCE_FACTORS = [1.0, 2.0, 8192.0, 4.0, 3.637978807091713e-12, 3.637978807091713e-12, 3.637978807091713e-12, 3.637978807091713e-12, 3.637978807091713e-12, 3.637978807091713e-12, 1.0, 2.0, 4096.0, 3.637978807091713e-12, 3.637978807091713e-12, 3.637978807091713e-12, 3.637978807091713e-12, 3.637978807091713e-12, 3.637978807091713e-12, 0.5, 0.5, 4096.0, 2.0, 1.8189894035458565e-12, 1.8189894035458565e-12, 1.8189894035458565e-12, 1.8189894035458565e-12, 1.8189894035458565e-12, 1.8189894035458565e-12, 0.000244140625, 0.00048828125, 1.0, 2.0, 0.0009765625, 8.881784197001252e-16, 8.881784197001252e-16, 0.0009765625, 0.0001220703125, 0.000244140625, 0.5, 1.0, 0.00048828125, 4.440892098500626e-16, 4.440892098500626e-16, 0.00048828125, 1024.0, 1.862645149230957e-09, 9.094947017729282e-13, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0]  # d_j / d_i per nonzero of F
+_BALANCE_START = [-2, -2, -1, 10, 11, 0, 40, -40, -40, -40, -40, -40, -40, -40, -40, 0, 0, 0]  # the exponents of that D: where run-time rebalancing starts
 
 
 def _balanced_norm(F):
@@ -367,9 +368,10 @@ def _balanced_norm(F):
 
     D is Osborne's balancing of F at the model's check operating point
     (modelgen.derivation.discretization.nominal_scaling); any D gives a valid
-    bound, so one D serves every operating point.  The same sums, in the same
-    order, as the C discretize and modelgen.derivation.discretization.balanced_norm
-    with that scaling, so all three choose the same s and order.
+    bound.  The same sums, in the same order, as the C discretize and
+    modelgen.derivation.discretization.balanced_norm with that scaling, so all
+    three choose the same s and order; a plan on it that needs a doubling is
+    retaken on _rebalanced_norm (step_plan).
     """
     if not _F_ROWS.size:
         return 0.0
@@ -377,6 +379,51 @@ def _balanced_norm(F):
     total = [0.0] * N_STATES
     for (i, j), factor in zip(_F_ENTRIES, _BALANCE_FACTORS):
         total[i] += abs(F[i][j]) * factor
+    if not math.isfinite(sum(total)):
+        return math.nan
+    return max(total)
+
+
+def _rebalanced_norm(F):
+    """||F||_D at the actual operating point: Osborne's sweeps from the fixed D (as the C discretize's rebalanced_norm)."""
+    return _swept_norm(F, _BALANCE_START)
+
+
+def _swept_norm(F, start):
+    """max_i sum_j |F_ij| d_j / d_i, D = 2^e from at most 8 Jacobi sweeps of Osborne's balancing in powers of two from e = start.
+
+    The same sums, in the same order (entry by entry, as bincount adds), as
+    the C discretize and modelgen.derivation.discretization.balancing_exponents
+    and scaled_norm, so all three choose the same s.  Python floats: for a pattern this small a loop over the entries costs less than numpy calls.
+    """
+    if not _F_ROWS.size:
+        return 0.0
+    F = F.tolist()
+    size = [abs(F[i][j]) for i, j in _F_ENTRIES]
+    off = [(i, j, size[e]) for e, (i, j) in enumerate(_F_ENTRIES) if i != j]
+    exponent = list(start)  # d = 2^exponent
+    for _ in range(8):
+        d = [math.ldexp(1.0, e) for e in exponent]
+        row = [0.0] * N_STATES
+        column = [0.0] * N_STATES
+        for i, j, a in off:
+            v = a * d[j] / d[i]
+            row[i] += v
+            column[j] += v
+        new = []
+        for e, r, c in zip(exponent, row, column):
+            if r > 0.0 and c > 0.0:
+                step = min(max((math.frexp(r)[1] - math.frexp(c)[1]) // 2, -8), 8)
+            else:
+                step = -8 if c > 0.0 else (8 if r > 0.0 else 0)
+            new.append(min(max(e + step, -40), 40))
+        if new == exponent:
+            break  # a fixed point: further sweeps change nothing
+        exponent = new
+    d = [math.ldexp(1.0, e) for e in exponent]
+    total = [0.0] * N_STATES
+    for (i, j), a in zip(_F_ENTRIES, size):
+        total[i] += a * d[j] / d[i]
     if not math.isfinite(sum(total)):
         return math.nan
     return max(total)
@@ -449,7 +496,14 @@ def discretize(F, G, q, T):
     norm = _balanced_norm(F)
     if not math.isfinite(norm):
         _check_finite("discretize", F=F)
-    s, order = _taylor_plan(norm, T)
+    try:
+        s, order = _taylor_plan(norm, T)
+    except ValueError:  # beyond 64 doublings in the fixed D: F's own balancing may still reach it
+        s, order = 65, TAYLOR_ORDER
+    if s:  # a doubling at stake: the plan on F's own balancing at this operating point (step_plan)
+        rebalanced = _rebalanced_norm(F)
+        if rebalanced < norm or s > 64:
+            s, order = _taylor_plan(min(rebalanced, norm), T)
     h = math.ldexp(T, -s)
     Fh = F * h
     series = _IDENTITY / math.factorial(order + 1)  # Horner: R_k = I / (k+1)! + F h R_(k+1), S = R_0

@@ -368,11 +368,15 @@ int ned_doppler18_twin_matrices_evaluate(const ned_doppler18_twin_params *restri
 #else
 #define NED_DOPPLER18_TWIN_BLOCK static
 #endif
+/* the exponents of D, balanced at generation time */
+static const signed char balance_exponent[NED_DOPPLER18_TWIN_N_STATES] = { -2, -2, -1, 10, 11, 0,
+        40, -40, -40, -40, -40, -40, -40, -40, -40, 0, 0, 0 };
+
 /* ||F||_D = max_i sum_j |F_ij| d_j / d_i (modelgen/derivation/discretization.py), D = 2^e fixed
    at generation time: Osborne's balancing of F at the model's check operating point
            (nominal_scaling;
-   any D gives a valid bound, so one D serves every operating point); the sums in the reference's
-   order (row by row), d_j / d_i an exact power of two. */
+   any D gives a valid bound); the sums in the reference's order (row by row), d_j / d_i an exact
+   power of two.  A plan on it that needs a doubling is retaken on rebalanced_norm. */
 static ned_doppler18_twin_scalar balanced_norm(const ned_doppler18_twin_matrices *restrict m)
 {
     ned_doppler18_twin_scalar v, norm = 0.0;
@@ -419,6 +423,272 @@ static ned_doppler18_twin_scalar balanced_norm(const ned_doppler18_twin_matrices
     return norm;
 }
 
+/* ||F||_D at the actual operating point (modelgen.derivation.discretization.step_plan), for a plan
+        on the
+   fixed D above that needs a doubling: D = 2^exponent from at most 8 Jacobi sweeps of Osborne's
+           balancing
+   in powers of two, starting from the fixed D (at the check operating point one sweep finds it a
+           fixed
+   point) and stopped at a fixed point; the sums in the reference's order (row by row). */
+static ned_doppler18_twin_scalar rebalanced_norm(const ned_doppler18_twin_matrices *restrict m,
+        ned_doppler18_twin_discretize_scratch *restrict w)
+{
+    ned_doppler18_twin_scalar v, norm = 0.0;
+    signed char exponent[NED_DOPPLER18_TWIN_N_STATES]; /* within [-40, 40] */
+    int i, k, changed;
+    for (i = 0; i < NED_DOPPLER18_TWIN_N_STATES; ++i) {
+        exponent[i] = balance_exponent[i];
+    }
+    for (k = 0, changed = 1; k < 8 && changed; ++k) {
+        changed = 0; /* a sweep that changes no scale is a fixed point: stop */
+        w->row_sum[0] = 0.0;
+        w->row_sum[1] = 0.0;
+        w->row_sum[2] = 0.0;
+        w->row_sum[3] = 0.0;
+        w->row_sum[4] = 0.0;
+        w->row_sum[5] = 0.0;
+        w->row_sum[6] = 0.0;
+        w->col_sum[0] = 0.0;
+        w->col_sum[1] = 0.0;
+        w->col_sum[2] = 0.0;
+        w->col_sum[3] = 0.0;
+        w->col_sum[4] = 0.0;
+        w->col_sum[5] = 0.0;
+        w->col_sum[7] = 0.0;
+        w->col_sum[8] = 0.0;
+        w->col_sum[9] = 0.0;
+        w->col_sum[10] = 0.0;
+        w->col_sum[11] = 0.0;
+        w->col_sum[12] = 0.0;
+        w->col_sum[13] = 0.0;
+        w->col_sum[14] = 0.0;
+        w->col_sum[15] = 0.0;
+        v = fabs(m->F[0]) * modelgen_power_of_two(exponent[1] - exponent[0]);
+        w->row_sum[0] += v;
+        w->col_sum[1] += v;
+        v = fabs(m->F[1]) * modelgen_power_of_two(exponent[2] - exponent[0]);
+        w->row_sum[0] += v;
+        w->col_sum[2] += v;
+        v = fabs(m->F[2]) * modelgen_power_of_two(exponent[4] - exponent[0]);
+        w->row_sum[0] += v;
+        w->col_sum[4] += v;
+        v = fabs(m->F[3]) * modelgen_power_of_two(exponent[5] - exponent[0]);
+        w->row_sum[0] += v;
+        w->col_sum[5] += v;
+        v = fabs(m->F[4]) * modelgen_power_of_two(exponent[7] - exponent[0]);
+        w->row_sum[0] += v;
+        w->col_sum[7] += v;
+        v = fabs(m->F[5]) * modelgen_power_of_two(exponent[8] - exponent[0]);
+        w->row_sum[0] += v;
+        w->col_sum[8] += v;
+        v = fabs(m->F[6]) * modelgen_power_of_two(exponent[9] - exponent[0]);
+        w->row_sum[0] += v;
+        w->col_sum[9] += v;
+        v = fabs(m->F[7]) * modelgen_power_of_two(exponent[10] - exponent[0]);
+        w->row_sum[0] += v;
+        w->col_sum[10] += v;
+        v = fabs(m->F[8]) * modelgen_power_of_two(exponent[11] - exponent[0]);
+        w->row_sum[0] += v;
+        w->col_sum[11] += v;
+        v = fabs(m->F[9]) * modelgen_power_of_two(exponent[12] - exponent[0]);
+        w->row_sum[0] += v;
+        w->col_sum[12] += v;
+        v = fabs(m->F[10]) * modelgen_power_of_two(exponent[0] - exponent[1]);
+        w->row_sum[1] += v;
+        w->col_sum[0] += v;
+        v = fabs(m->F[11]) * modelgen_power_of_two(exponent[2] - exponent[1]);
+        w->row_sum[1] += v;
+        w->col_sum[2] += v;
+        v = fabs(m->F[12]) * modelgen_power_of_two(exponent[3] - exponent[1]);
+        w->row_sum[1] += v;
+        w->col_sum[3] += v;
+        v = fabs(m->F[13]) * modelgen_power_of_two(exponent[7] - exponent[1]);
+        w->row_sum[1] += v;
+        w->col_sum[7] += v;
+        v = fabs(m->F[14]) * modelgen_power_of_two(exponent[8] - exponent[1]);
+        w->row_sum[1] += v;
+        w->col_sum[8] += v;
+        v = fabs(m->F[15]) * modelgen_power_of_two(exponent[9] - exponent[1]);
+        w->row_sum[1] += v;
+        w->col_sum[9] += v;
+        v = fabs(m->F[16]) * modelgen_power_of_two(exponent[10] - exponent[1]);
+        w->row_sum[1] += v;
+        w->col_sum[10] += v;
+        v = fabs(m->F[17]) * modelgen_power_of_two(exponent[11] - exponent[1]);
+        w->row_sum[1] += v;
+        w->col_sum[11] += v;
+        v = fabs(m->F[18]) * modelgen_power_of_two(exponent[12] - exponent[1]);
+        w->row_sum[1] += v;
+        w->col_sum[12] += v;
+        v = fabs(m->F[19]) * modelgen_power_of_two(exponent[0] - exponent[2]);
+        w->row_sum[2] += v;
+        w->col_sum[0] += v;
+        v = fabs(m->F[20]) * modelgen_power_of_two(exponent[1] - exponent[2]);
+        w->row_sum[2] += v;
+        w->col_sum[1] += v;
+        v = fabs(m->F[21]) * modelgen_power_of_two(exponent[4] - exponent[2]);
+        w->row_sum[2] += v;
+        w->col_sum[4] += v;
+        v = fabs(m->F[22]) * modelgen_power_of_two(exponent[5] - exponent[2]);
+        w->row_sum[2] += v;
+        w->col_sum[5] += v;
+        v = fabs(m->F[23]) * modelgen_power_of_two(exponent[7] - exponent[2]);
+        w->row_sum[2] += v;
+        w->col_sum[7] += v;
+        v = fabs(m->F[24]) * modelgen_power_of_two(exponent[8] - exponent[2]);
+        w->row_sum[2] += v;
+        w->col_sum[8] += v;
+        v = fabs(m->F[25]) * modelgen_power_of_two(exponent[9] - exponent[2]);
+        w->row_sum[2] += v;
+        w->col_sum[9] += v;
+        v = fabs(m->F[26]) * modelgen_power_of_two(exponent[10] - exponent[2]);
+        w->row_sum[2] += v;
+        w->col_sum[10] += v;
+        v = fabs(m->F[27]) * modelgen_power_of_two(exponent[11] - exponent[2]);
+        w->row_sum[2] += v;
+        w->col_sum[11] += v;
+        v = fabs(m->F[28]) * modelgen_power_of_two(exponent[12] - exponent[2]);
+        w->row_sum[2] += v;
+        w->col_sum[12] += v;
+        v = fabs(m->F[29]) * modelgen_power_of_two(exponent[1] - exponent[3]);
+        w->row_sum[3] += v;
+        w->col_sum[1] += v;
+        v = fabs(m->F[30]) * modelgen_power_of_two(exponent[2] - exponent[3]);
+        w->row_sum[3] += v;
+        w->col_sum[2] += v;
+        v = fabs(m->F[32]) * modelgen_power_of_two(exponent[4] - exponent[3]);
+        w->row_sum[3] += v;
+        w->col_sum[4] += v;
+        v = fabs(m->F[33]) * modelgen_power_of_two(exponent[5] - exponent[3]);
+        w->row_sum[3] += v;
+        w->col_sum[5] += v;
+        v = fabs(m->F[34]) * modelgen_power_of_two(exponent[13] - exponent[3]);
+        w->row_sum[3] += v;
+        w->col_sum[13] += v;
+        v = fabs(m->F[35]) * modelgen_power_of_two(exponent[14] - exponent[3]);
+        w->row_sum[3] += v;
+        w->col_sum[14] += v;
+        v = fabs(m->F[36]) * modelgen_power_of_two(exponent[15] - exponent[3]);
+        w->row_sum[3] += v;
+        w->col_sum[15] += v;
+        v = fabs(m->F[37]) * modelgen_power_of_two(exponent[0] - exponent[4]);
+        w->row_sum[4] += v;
+        w->col_sum[0] += v;
+        v = fabs(m->F[38]) * modelgen_power_of_two(exponent[2] - exponent[4]);
+        w->row_sum[4] += v;
+        w->col_sum[2] += v;
+        v = fabs(m->F[39]) * modelgen_power_of_two(exponent[3] - exponent[4]);
+        w->row_sum[4] += v;
+        w->col_sum[3] += v;
+        v = fabs(m->F[41]) * modelgen_power_of_two(exponent[5] - exponent[4]);
+        w->row_sum[4] += v;
+        w->col_sum[5] += v;
+        v = fabs(m->F[42]) * modelgen_power_of_two(exponent[13] - exponent[4]);
+        w->row_sum[4] += v;
+        w->col_sum[13] += v;
+        v = fabs(m->F[43]) * modelgen_power_of_two(exponent[14] - exponent[4]);
+        w->row_sum[4] += v;
+        w->col_sum[14] += v;
+        v = fabs(m->F[44]) * modelgen_power_of_two(exponent[15] - exponent[4]);
+        w->row_sum[4] += v;
+        w->col_sum[15] += v;
+        v = fabs(m->F[45]) * modelgen_power_of_two(exponent[3] - exponent[5]);
+        w->row_sum[5] += v;
+        w->col_sum[3] += v;
+        v = fabs(m->F[46]) * modelgen_power_of_two(exponent[4] - exponent[6]);
+        w->row_sum[6] += v;
+        w->col_sum[4] += v;
+        v = fabs(m->F[47]) * modelgen_power_of_two(exponent[5] - exponent[6]);
+        w->row_sum[6] += v;
+        w->col_sum[5] += v;
+        /* a state with no off-diagonal entry in its row (column) of F has a zero row (column)
+                sum */
+        changed |= modelgen_balance_step(w->row_sum[0], w->col_sum[0], &exponent[0]);
+        changed |= modelgen_balance_step(w->row_sum[1], w->col_sum[1], &exponent[1]);
+        changed |= modelgen_balance_step(w->row_sum[2], w->col_sum[2], &exponent[2]);
+        changed |= modelgen_balance_step(w->row_sum[3], w->col_sum[3], &exponent[3]);
+        changed |= modelgen_balance_step(w->row_sum[4], w->col_sum[4], &exponent[4]);
+        changed |= modelgen_balance_step(w->row_sum[5], w->col_sum[5], &exponent[5]);
+        changed |= modelgen_balance_step(w->row_sum[6], 0.0, &exponent[6]);
+        changed |= modelgen_balance_step(0.0, w->col_sum[7], &exponent[7]);
+        changed |= modelgen_balance_step(0.0, w->col_sum[8], &exponent[8]);
+        changed |= modelgen_balance_step(0.0, w->col_sum[9], &exponent[9]);
+        changed |= modelgen_balance_step(0.0, w->col_sum[10], &exponent[10]);
+        changed |= modelgen_balance_step(0.0, w->col_sum[11], &exponent[11]);
+        changed |= modelgen_balance_step(0.0, w->col_sum[12], &exponent[12]);
+        changed |= modelgen_balance_step(0.0, w->col_sum[13], &exponent[13]);
+        changed |= modelgen_balance_step(0.0, w->col_sum[14], &exponent[14]);
+        changed |= modelgen_balance_step(0.0, w->col_sum[15], &exponent[15]);
+    }
+    v = fabs(m->F[0]) * modelgen_power_of_two(exponent[1] - exponent[0]) + fabs(m->F[1]) *
+            modelgen_power_of_two(exponent[2] - exponent[0]) + fabs(m->F[2]) *
+            modelgen_power_of_two(exponent[4] - exponent[0]) + fabs(m->F[3]) *
+            modelgen_power_of_two(exponent[5] - exponent[0]) + fabs(m->F[4]) *
+            modelgen_power_of_two(exponent[7] - exponent[0]) + fabs(m->F[5]) *
+            modelgen_power_of_two(exponent[8] - exponent[0]) + fabs(m->F[6]) *
+            modelgen_power_of_two(exponent[9] - exponent[0]) + fabs(m->F[7]) *
+            modelgen_power_of_two(exponent[10] - exponent[0]) + fabs(m->F[8]) *
+            modelgen_power_of_two(exponent[11] - exponent[0]) + fabs(m->F[9]) *
+            modelgen_power_of_two(exponent[12] - exponent[0]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[10]) * modelgen_power_of_two(exponent[0] - exponent[1]) + fabs(m->F[11]) *
+            modelgen_power_of_two(exponent[2] - exponent[1]) + fabs(m->F[12]) *
+            modelgen_power_of_two(exponent[3] - exponent[1]) + fabs(m->F[13]) *
+            modelgen_power_of_two(exponent[7] - exponent[1]) + fabs(m->F[14]) *
+            modelgen_power_of_two(exponent[8] - exponent[1]) + fabs(m->F[15]) *
+            modelgen_power_of_two(exponent[9] - exponent[1]) + fabs(m->F[16]) *
+            modelgen_power_of_two(exponent[10] - exponent[1]) + fabs(m->F[17]) *
+            modelgen_power_of_two(exponent[11] - exponent[1]) + fabs(m->F[18]) *
+            modelgen_power_of_two(exponent[12] - exponent[1]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[19]) * modelgen_power_of_two(exponent[0] - exponent[2]) + fabs(m->F[20]) *
+            modelgen_power_of_two(exponent[1] - exponent[2]) + fabs(m->F[21]) *
+            modelgen_power_of_two(exponent[4] - exponent[2]) + fabs(m->F[22]) *
+            modelgen_power_of_two(exponent[5] - exponent[2]) + fabs(m->F[23]) *
+            modelgen_power_of_two(exponent[7] - exponent[2]) + fabs(m->F[24]) *
+            modelgen_power_of_two(exponent[8] - exponent[2]) + fabs(m->F[25]) *
+            modelgen_power_of_two(exponent[9] - exponent[2]) + fabs(m->F[26]) *
+            modelgen_power_of_two(exponent[10] - exponent[2]) + fabs(m->F[27]) *
+            modelgen_power_of_two(exponent[11] - exponent[2]) + fabs(m->F[28]) *
+            modelgen_power_of_two(exponent[12] - exponent[2]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[29]) * modelgen_power_of_two(exponent[1] - exponent[3]) + fabs(m->F[30]) *
+            modelgen_power_of_two(exponent[2] - exponent[3]) + fabs(m->F[31]) + fabs(m->F[32]) *
+            modelgen_power_of_two(exponent[4] - exponent[3]) + fabs(m->F[33]) *
+            modelgen_power_of_two(exponent[5] - exponent[3]) + fabs(m->F[34]) *
+            modelgen_power_of_two(exponent[13] - exponent[3]) + fabs(m->F[35]) *
+            modelgen_power_of_two(exponent[14] - exponent[3]) + fabs(m->F[36]) *
+            modelgen_power_of_two(exponent[15] - exponent[3]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[37]) * modelgen_power_of_two(exponent[0] - exponent[4]) + fabs(m->F[38]) *
+            modelgen_power_of_two(exponent[2] - exponent[4]) + fabs(m->F[39]) *
+            modelgen_power_of_two(exponent[3] - exponent[4]) + fabs(m->F[40]) + fabs(m->F[41]) *
+            modelgen_power_of_two(exponent[5] - exponent[4]) + fabs(m->F[42]) *
+            modelgen_power_of_two(exponent[13] - exponent[4]) + fabs(m->F[43]) *
+            modelgen_power_of_two(exponent[14] - exponent[4]) + fabs(m->F[44]) *
+            modelgen_power_of_two(exponent[15] - exponent[4]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[45]) * modelgen_power_of_two(exponent[3] - exponent[5]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[46]) * modelgen_power_of_two(exponent[4] - exponent[6]) + fabs(m->F[47]) *
+            modelgen_power_of_two(exponent[5] - exponent[6]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[48]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[49]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[50]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[51]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[52]);
+    norm = v > norm ? v : norm;
+    v = fabs(m->F[53]);
+    norm = v > norm ? v : norm;
+    return norm;
+}
+
+
 /* 1/(k+1)!, k = 0..TAYLOR_ORDER: the diagonal of R_k in the Horner chain (the order is chosen at
         run time). */
 static const ned_doppler18_twin_scalar taylor_coefficient[10] = {
@@ -434,6 +704,15 @@ static const ned_doppler18_twin_scalar taylor_coefficient[10] = {
     1.0 / 3628800.0
 };
 
+/* theta_m, m = 1..TAYLOR_ORDER: the largest theta for which order m meets the tolerance without a
+        doubling
+   (modelgen.derivation.discretization.single_step_thresholds: the bound does not decrease with
+           theta, so
+   bound <= tolerance exactly when theta <= theta_m). */
+static const ned_doppler18_twin_scalar single_step_threshold[9] = { 4.99999999999625e-13,
+        9.999993333339721e-07, 0.00014421629076473476, 0.0018601713250850419, 0.009009841196753044,
+        0.026537173699457135, 0.058551795853975144, 0.1075401723948457, 0.17446260620028906 };
+
 /* The doublings s and the order m summed for ||F||_D = norm and step T
    (modelgen.derivation.discretization.taylor_plan); ERR_NONFINITE beyond MAX_DOUBLINGS. */
 static int taylor_plan(const ned_doppler18_twin_scalar norm, const ned_doppler18_twin_scalar T, int
@@ -442,7 +721,18 @@ static int taylor_plan(const ned_doppler18_twin_scalar norm, const ned_doppler18
     /* the smallest s for which order TAYLOR_ORDER meets the tolerance, then the smallest order
        that meets it with that s */
     int s, k;
-    ned_doppler18_twin_scalar theta = norm * T, growth = exp(norm * T), power = 1.0;
+    ned_doppler18_twin_scalar theta = norm * T, growth, power = 1.0;
+    if (theta <= single_step_threshold[NED_DOPPLER18_TWIN_TAYLOR_ORDER - 1]) {
+        /* no doubling: the smallest order whose threshold theta is within (the same s and m as the
+                loops below) */
+        for (k = 1; k < NED_DOPPLER18_TWIN_TAYLOR_ORDER && !(theta <= single_step_threshold[k - 1]);
+                ++k) {
+        }
+        *halvings = 0;
+        *order = k;
+        return NED_DOPPLER18_TWIN_OK;
+    }
+    growth = exp(theta);
     for (s = 0; !(modelgen_step_error_bound(growth, theta, NED_DOPPLER18_TWIN_TAYLOR_ORDER, s) <=
             NED_DOPPLER18_TWIN_TAYLOR_TOLERANCE); ++s) {
         if (s == NED_DOPPLER18_TWIN_MAX_DOUBLINGS) {
@@ -2253,7 +2543,8 @@ int ned_doppler18_twin_discretize(const ned_doppler18_twin_matrices *restrict m,
 {
     ned_doppler18_twin_discretize_scratch *w = &work->discretize;
     int i, e, c;
-    int halvings, order, status;
+    int halvings = 0, order = 0, status; /* set by taylor_plan when it succeeds (gcc cannot tell) */
+    ned_doppler18_twin_scalar norm;
     int k;
     ned_doppler18_twin_scalar sum_check;
     ned_doppler18_twin_scalar qd_check = 0.0;
@@ -2326,7 +2617,17 @@ int ned_doppler18_twin_discretize(const ned_doppler18_twin_matrices *restrict m,
     /* Scaling and squaring (modelgen/derivation/discretization.py): the series over h = T / 2^s,
        of the order the plan chose, then s doublings Phi(2h) = Phi(h)^2 and
        S(2h) = (S(h) + Phi(h) S(h)) / 2, where h S(h) = int_0^h e^{F s} ds. */
-    status = taylor_plan(balanced_norm(m), T, &halvings, &order);
+    norm = balanced_norm(m);
+    status = taylor_plan(norm, T, &halvings, &order);
+    if (status != NED_DOPPLER18_TWIN_OK || halvings > 0) {
+        /* a doubling at stake: the plan on F's own balancing at this operating point, from the
+                fixed D
+           (modelgen.derivation.discretization.step_plan) */
+        const ned_doppler18_twin_scalar rebalanced = rebalanced_norm(m, w);
+        if (rebalanced < norm || status != NED_DOPPLER18_TWIN_OK) {
+            status = taylor_plan(rebalanced < norm ? rebalanced : norm, T, &halvings, &order);
+        }
+    }
     if (status != NED_DOPPLER18_TWIN_OK) {
         return status;
     }

@@ -223,6 +223,10 @@ typedef struct {
             (k + 1)! (and the even levels R_k): each block row's dense segment, then the diagonal
             rows */
     ned_doppler32_augmented_scalar fh[NED_DOPPLER32_AUGMENTED_NNZ_F]; /* F h at the nonzeros of F */
+    ned_doppler32_augmented_scalar row_sum[NED_DOPPLER32_AUGMENTED_N_STATES]; /* balancing:
+            off-diagonal row sums of D^-1 |F| D */
+    ned_doppler32_augmented_scalar col_sum[NED_DOPPLER32_AUGMENTED_N_STATES]; /* balancing:
+            off-diagonal column sums of D^-1 |F| D */
 } ned_doppler32_augmented_discretize_scratch;
 
 /* Scratch memory of predict, update and set_covariance. */

@@ -182,6 +182,10 @@ typedef struct {
     ned_inertial16_scalar S[NED_INERTIAL16_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! (and the
             even levels R_k): each block row's dense segment, then the diagonal rows */
     ned_inertial16_scalar fh[NED_INERTIAL16_NNZ_F]; /* F h at the nonzeros of F */
+    ned_inertial16_scalar row_sum[NED_INERTIAL16_N_STATES]; /* balancing: off-diagonal row sums of
+            D^-1 |F| D */
+    ned_inertial16_scalar col_sum[NED_INERTIAL16_N_STATES]; /* balancing: off-diagonal column sums
+            of D^-1 |F| D */
 } ned_inertial16_discretize_scratch;
 
 /* Scratch memory of predict, update and set_covariance. */

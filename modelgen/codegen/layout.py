@@ -134,8 +134,9 @@ class UnrolledDiscretizeSizes:
     S (``DiscretizePlan.segment_size``: each block row's dense segment over
     its span of Phi's pattern, padded to an even length, and one entry per
     diagonal row; the rows e_i are not stored); ``balancing``: whether
-    discretize balances F at run time (no scaling fixed at generation time)
-    and so needs the row and column sums.
+    discretize can balance F at run time (F has an off-diagonal entry: with
+    no scaling fixed at generation time, or to retake a plan on a fixed D
+    that needs a doubling) and so needs the row and column sums.
     """
 
     terms: int
@@ -144,7 +145,7 @@ class UnrolledDiscretizeSizes:
 
 
 def _unrolled_discretize_scratch(prefix: str, sizes: ModelSizes, unrolled: UnrolledDiscretizeSizes, N: Dim, nnz_f: Dim) -> tuple[Field, ...]:
-    """Members of the unrolled discretize's scratch: compressed terms, S, F h and (run-time balancing only) its sums."""
+    """Members of the unrolled discretize's scratch: compressed terms, S, F h and (run-time balancing) its sums."""
     fields = (
         Field("term", (Dim("2", 2), Dim(f"{prefix}_N_TERMS", unrolled.terms)), "the Horner chain's odd levels R_k (term[1]); the doubling's new values; S G"),
         Field("S", (Dim(f"{prefix}_N_ACTIVE_ENTRIES", unrolled.active),), "S = sum (F h)^k / (k + 1)! (and the even levels R_k): each block row's dense segment, then the diagonal rows"),

@@ -38,11 +38,14 @@ s is the smallest integer with theta = ||F||_D h <= theta_N, where
   ||F T|| about 650 at T = 60 s for the paper's model; balanced it is
   0.16, the Schuler rate times T).  Since any D will do, the generated
   code balances once, at generation time, at the model's check operating
-  point (``nominal_scaling``), and keeps that D as constants for every
-  operating point: the run-time norm is then one pass over the nonzeros of F
-  (no sweeps).  Elsewhere the fixed D gives a norm within a factor of about
-  4 of F's own balancing (measured over operating points of the built-in
-  models), so at worst one more order or doubling, never a wrong bound.  A
+  point (``nominal_scaling``), and keeps that D as constants: the run-time
+  norm is then one pass over the nonzeros of F (no sweeps).  At another
+  operating point that D can be far from F's own balancing (a state that
+  drives nothing at the check point, where a rate is zero, keeps d = 1), so
+  when the plan on the fixed D needs a doubling, F is rebalanced at run
+  time from that D and the plan retaken on the smaller norm (``step_plan``):
+  the doublings are those of F's own balancing at the actual operating
+  point, and the sweeps run only when a doubling is at stake.  A
   model without a ``check:`` section is balanced at run time, as above;
 * theta_N is the largest theta for which the remainder of the series,
   at most theta^(N+1) / (N+1)! * (N+2) / (N+2-theta) in that norm, is below
@@ -173,19 +176,21 @@ def sweep_exponents(row: np.ndarray, column: np.ndarray) -> np.ndarray:
     return np.where(both, ratio, lone).astype(np.int64)
 
 
-def balancing_exponents(F: np.ndarray) -> tuple[int, ...]:
+def balancing_exponents(F: np.ndarray, start: tuple[int, ...] | None = None) -> tuple[int, ...]:
     """e with D = diag(2^e) from Osborne's balancing of F (module docstring).
 
     At most BALANCING_SWEEPS Jacobi sweeps over the off-diagonal nonzeros,
     stopped at a fixed point; each e_i within +-MAX_SCALE_EXPONENT, so that
-    no ratio d_j / d_i overflows, even in single precision.
+    no ratio d_j / d_i overflows, even in single precision.  The sweeps start
+    from D = I, or from D = 2^``start`` (the nominal scaling: run-time
+    rebalancing, :func:`step_plan`).
     """
     F = np.asarray(F, dtype=float)
     rows, cols = np.nonzero(F)
     n = F.shape[0]
     off = rows != cols
     off_rows, off_cols, off_size = rows[off], cols[off], np.abs(F[rows[off], cols[off]])
-    exponent = np.zeros(n, dtype=np.int64)  # d = 2^exponent
+    exponent = np.zeros(n, dtype=np.int64) if start is None else np.array(start, dtype=np.int64)  # d = 2^exponent
     for _ in range(BALANCING_SWEEPS if off_rows.size else 0):
         d = np.ldexp(1.0, exponent)
         v = off_size * d[off_cols] / d[off_rows]
@@ -306,6 +311,73 @@ def taylor_plan(
     return s, order
 
 
+def step_plan(
+    F: np.ndarray,
+    T: float,
+    order: int,
+    tolerance: float | None = DEFAULT_TOLERANCE,
+    scaling: tuple[int, ...] | None = None,
+    unit_roundoff: float = DOUBLE_ROUNDOFF,
+) -> tuple[int, int]:
+    """(s, m) at the actual operating point F: what the generated C and Python choose at run time.
+
+    ``scaling`` None: F is balanced from D = I and :func:`taylor_plan` runs
+    on that norm.  A nominal scaling (:func:`nominal_scaling`): the plan is
+    first taken on ||F||_D with that fixed D (one pass over F's nonzeros, no
+    sweeps); when it needs a doubling, F is rebalanced at run time, the
+    sweeps starting from the nominal D (so that at the check operating point
+    they stop after one), and the plan is retaken on the smaller of the two
+    norms (each is a valid bound).  A D balanced at another operating point
+    can be far from this one's: the 32-state model's check point has zero
+    body rates, so its scale-factor states drive nothing there and keep
+    d = 1, and at a manoeuvre the fixed D gives ||F||_D = 7.1 where F's own
+    balancing gives 0.89 (3 doublings against none at T = 0.148 s).  The
+    sweeps cost a few passes over F's nonzeros, a doubling a sparse matrix
+    product or two, so they run only when a doubling is at stake.
+    """
+    if scaling is None:
+        return taylor_plan(balanced_norm(F), T, order, tolerance, unit_roundoff)
+    norm = scaled_norm(F, scaling)
+    try:
+        s, m = taylor_plan(norm, T, order, tolerance, unit_roundoff)
+    except ModelError:  # beyond MAX_DOUBLINGS in the fixed D: F's own balancing may still reach it
+        s, m = MAX_DOUBLINGS + 1, order
+    if s == 0:
+        return s, m
+    rebalanced = scaled_norm(F, balancing_exponents(F, scaling))
+    if rebalanced < norm or s > MAX_DOUBLINGS:
+        return taylor_plan(min(rebalanced, norm), T, order, tolerance, unit_roundoff)
+    return s, m
+
+
+@functools.lru_cache(maxsize=None)
+def single_step_thresholds(order: int, tolerance: float) -> tuple[float, ...]:
+    """theta_m, m = 1..order: the largest double theta with step_error_bound(theta, m, 0) <= tolerance.
+
+    The bound is a product and quotient of factors that do not decrease with
+    theta, each rounded (rounding is monotone), so it does not decrease with
+    theta either, and bound <= tolerance exactly when theta <= theta_m: the
+    generated C's plan compares ||F||_D T with these (a double each, printed
+    exactly) instead of summing the bound order by order whenever no doubling
+    is needed (theta <= theta_order), the same s and m as :func:`taylor_plan`
+    with no call of exp.  Found by bisection over the doubles' bit patterns.
+    """
+    out = []
+    for m in range(1, order + 1):
+        low, high = 0, int(np.float64(m + 1).view(np.int64))  # bit patterns of 0.0 and m + 1 (where the bound is huge)
+        if not step_error_bound(0.0, m, 0) <= tolerance:
+            out.append(-1.0)  # no step meets it (never for a tolerance above the unit roundoff)
+            continue
+        while high - low > 1:
+            mid = (low + high) // 2
+            if step_error_bound(float(np.int64(mid).view(np.float64)), m, 0) <= tolerance:
+                low = mid
+            else:
+                high = mid
+        out.append(float(np.int64(low).view(np.float64)))
+    return tuple(out)
+
+
 def _taylor_increment(F: np.ndarray, h: float, order: int) -> tuple[np.ndarray, np.ndarray]:
     """(E, S) over one step h: S = sum_(k=0..m) (F h)^k / (k+1)! by Horner's rule, E = Phi - I = F h S.
 
@@ -363,7 +435,7 @@ def taylor_discretization_with_doublings(
     T = check_step(T)
     if not (np.all(np.isfinite(F)) and np.all(np.isfinite(G))):
         raise ModelError("discretize: F or G has a non-finite entry")
-    s, order = taylor_plan(balanced_norm(F, scaling), T, order, tolerance)
+    s, order = step_plan(F, T, order, tolerance, scaling)
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused just below, with a message
         increment, series = _taylor_increment(F, math.ldexp(T, -s), order)
         for _ in range(s):  # on E = Phi - I, so that the identity does not round the small part away

@@ -194,6 +194,10 @@ typedef struct {
     ned_doppler18_scalar S[NED_DOPPLER18_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! (and the
             even levels R_k): each block row's dense segment, then the diagonal rows */
     ned_doppler18_scalar fh[NED_DOPPLER18_NNZ_F]; /* F h at the nonzeros of F */
+    ned_doppler18_scalar row_sum[NED_DOPPLER18_N_STATES]; /* balancing: off-diagonal row sums of
+            D^-1 |F| D */
+    ned_doppler18_scalar col_sum[NED_DOPPLER18_N_STATES]; /* balancing: off-diagonal column sums of
+            D^-1 |F| D */
 } ned_doppler18_discretize_scratch;
 
 /* Scratch memory of predict, update and set_covariance. */

@@ -15,7 +15,7 @@ from modelgen.codegen.layout import CLayout, CompactDiscretizeSizes, UnrolledDis
 from modelgen.codegen.smoother import reset_inverse
 from modelgen.codegen.structure import FilterStructure
 from modelgen.codegen.van_loan import QD_MARGIN
-from modelgen.derivation.discretization import DOUBLE_ROUNDOFF, FLOAT_ROUNDOFF, nominal_scaling, series_range
+from modelgen.derivation.discretization import DOUBLE_ROUNDOFF, FLOAT_ROUNDOFF, nominal_scaling, series_range, single_step_thresholds
 from modelgen.errors import ModelError
 
 BANNER = "/* GENERATED FILE - DO NOT EDIT (modelgen) */"
@@ -479,7 +479,7 @@ def c_context(description: FilterDescription) -> dict[str, object]:
     unrolled = description.discretize_plan if description.discretize_unrolled else None
     compact_discretize = compact_discretize_context(structure) if not unrolled and not options.van_loan else None
     scaling = nominal_scaling(description.derived)  # D of ||F||_D fixed at generation time (None: balanced at run time)
-    balancing = scaling is None and any(i != j for i, j in structure.entries("F"))  # the template's run-time sweeps
+    balancing = any(i != j for i, j in structure.entries("F"))  # the template's run-time sweeps (also from a fixed D: step_plan)
     layout = c_layout(
         sizes, options, prefix,
         UnrolledDiscretizeSizes(unrolled.term_size, unrolled.active_size, balancing) if unrolled else None,
@@ -558,6 +558,10 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         if options.taylor_tolerance is not None and options.taylor_tolerance > roundoff
         else None,  # a tolerance within the rounding of the arithmetic (any in float): the fixed order
         "recompute_threshold": c_number(options.recompute_threshold, options.scalar) if options.recompute_threshold is not None else None,
+        # theta_m of the plan's single-step fast path (double only: the thresholds are of the double bound)
+        "single_step_thresholds": [c_number(x, "double") for x in single_step_thresholds(options.taylor_order, options.taylor_tolerance)]
+        if options.scalar == "double" and options.taylor_tolerance is not None and options.taylor_tolerance > roundoff
+        else None,
         "discretize_unrolled": bool(unrolled),
         "van_loan": options.van_loan,
         "qd_margin": QD_MARGIN,

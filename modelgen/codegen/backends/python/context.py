@@ -143,6 +143,7 @@ def python_context(description: FilterDescription) -> dict[str, object]:
         "smoother": smoother_context(description),
         "balance_in_python": int(structure.F.sum()) <= PYTHON_BALANCING_ENTRIES,
         "balance_factors": _balance_factors(structure, nominal_scaling(description.derived)),
+        "balance_start": repr(list(nominal_scaling(description.derived) or ())),
         "series_range": repr(series_range(options.taylor_order, DOUBLE_ROUNDOFF)),
         "taylor_tolerance": repr(options.taylor_tolerance)
         if options.taylor_tolerance is not None and options.taylor_tolerance > DOUBLE_ROUNDOFF
