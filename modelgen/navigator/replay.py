@@ -124,7 +124,8 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
 
         mark = time.perf_counter()
         echo("  Cortex-M4F build (float filter) and the log under qemu-arm")
-        arm = embedded_replay(spec, log_arrays(config, inputs, spec), flights["c"].outputs)
+        arm_arrays = log_arrays(config, inputs, spec)
+        arm = embedded_replay(spec, arm_arrays, flights["c"].outputs)
         timings["embedded_s"] = time.perf_counter() - mark
     flight = flights["c"] if "c" in flights else flights["python"]
     timings["fly_s"] = timings.get("fly_c_s", timings.get("fly_python_s", 0.0))
@@ -162,6 +163,7 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
     if embedded:
         result["embedded"] = {"cortex_m4f_text_bytes": arm.text, "cortex_m4f_data_bytes": arm.data,
                               "cortex_m4f_bss_bytes": arm.bss, "navigator_struct_bytes": arm.navigator_struct_bytes,
+                              "rest_max_samples": arm_arrays.rest_max, "window_max_samples": arm_arrays.window_max,
                               "worst_case_stack_bytes": arm.worst_case_stack, "heap_or_stdio_symbols": arm.forbidden_symbols,
                               "qemu_max_position_difference_m": arm.max_position_difference_m,
                               "tolerance_m": EMBEDDED_TOLERANCE_M}

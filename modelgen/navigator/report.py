@@ -16,7 +16,6 @@ from pathlib import Path
 
 import numpy as np
 
-from modelgen.navigator.cnav import REST_MAX
 from modelgen.navigator.config import NavigatorConfig
 from modelgen.navigator.logs import GnssLog
 from modelgen.navigator.mechanization import radii
@@ -521,8 +520,9 @@ def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, 
                   "on the M4F.", "",
                   f"- code: .text {e['cortex_m4f_text_bytes']} B, .data {e['cortex_m4f_data_bytes']} B, .bss "
                   f"{e['cortex_m4f_bss_bytes']} B (filter and navigator objects, -O2); the caller's navigator struct "
-                  f"{e['navigator_struct_bytes']} B (of which {REST_MAX * 7 * 8} B hold the last {REST_MAX} IMU "
-                  f"samples for the navigator's own alignment, idle once aligned); no heap ({'none' if not e['heap_or_stdio_symbols'] else ', '.join(e['heap_or_stdio_symbols'])} "
+                  f"{e['navigator_struct_bytes']} B (of which {e['rest_max_samples'] * 7 * 8} B hold the last "
+                  f"{e['rest_max_samples']} IMU samples for the navigator's own alignment, idle once aligned, and "
+                  f"{e['window_max_samples'] * 2 * 8} B the zero-velocity detector's window of {e['window_max_samples']}); no heap ({'none' if not e['heap_or_stdio_symbols'] else ', '.join(e['heap_or_stdio_symbols'])} "
                   "of malloc/free/printf... referenced)",
                   f"- worst-case stack (call graph): {stack}",
                   f"- the whole log under qemu-arm against the double C navigator: largest antenna-position difference "

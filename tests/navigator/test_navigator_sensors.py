@@ -237,3 +237,18 @@ def test_odometer_and_barometer_fly_under_qemu_arm_within_1_cm_of_the_double_c(t
     embedded = result.summary["embedded"]
     assert embedded["heap_or_stdio_symbols"] == []
     assert embedded["qemu_max_position_difference_m"] <= 0.01, embedded  # 1.2e-4 m when written
+    # the report states the buffers this build got (sized from the configuration and the log), which the struct holds
+    from modelgen.navigator.cnav import rest_capacity, window_capacity
+    from modelgen.navigator.report import summary_markdown
+
+    from modelgen.navigator.logs import read_gnss, read_imu
+    from modelgen.navigator.navigator import prepare
+
+    c = result.config
+    time_ = prepare(c, read_imu(c.imu_source, c.gap_factor, c.gap_action), read_gnss(c.gnss_source)).time
+    rest, window = embedded["rest_max_samples"], embedded["window_max_samples"]
+    assert (rest, window) == (rest_capacity(c, time_), window_capacity(c, time_))
+    assert embedded["navigator_struct_bytes"] >= rest * (7 * 8 + 1) + window * 2 * 8
+    text = summary_markdown(result.summary, result.config, result.timings, result.config.velocity_latency)
+    assert f"of which {rest * 7 * 8} B hold the last {rest} IMU samples" in text
+    assert f"{window * 2 * 8} B the zero-velocity detector's window of {window})" in text
