@@ -105,27 +105,35 @@ def test_latex_columns_add_up_to_less_than_the_text_width(enu_derived):
     assert (LATEX_QUANTITY_WIDTH + LATEX_VALUE_WIDTH) * 345 <= 345 - 50 - 24
 
 
+@pytest.fixture(scope="module")
+def builtin_latex_folder(tmp_path_factory):
+    """Every built-in model's LaTeX table, derived and written once for both paper sizes: (folder, \\input lines)."""
+    from modelgen.jobs import load_and_derive
+    from modelgen.model.loading import builtin_models
+
+    folder = tmp_path_factory.mktemp("latex")
+    inputs = []
+    for name in builtin_models():
+        (folder / f"{name}.tex").write_text(to_latex(load_and_derive(name)), encoding="utf-8")
+        inputs.append(f"\\input{{{name}.tex}}\\clearpage")
+    return folder, inputs
+
+
 @pytest.mark.compile
 @pytest.mark.parametrize("paper", ["a4paper", "letterpaper"])
-def test_latex_export_of_every_builtin_model_fits_the_page(tmp_path, paper):
+def test_latex_export_of_every_builtin_model_fits_the_page(builtin_latex_folder, paper):
     """pdflatex sets every built-in model's table without an overfull line (it used to be 153 pt too wide)."""
     import shutil
     import subprocess
 
-    from modelgen.jobs import load_and_derive
-    from modelgen.model.loading import builtin_models
-
     if shutil.which("pdflatex") is None:
         pytest.skip("pdflatex is not installed (Debian: texlive-latex-base texlive-latex-recommended)")
-    inputs = []
-    for name in builtin_models():
-        (tmp_path / f"{name}.tex").write_text(to_latex(load_and_derive(name)), encoding="utf-8")
-        inputs.append(f"\\input{{{name}.tex}}\\clearpage")
-    (tmp_path / "doc.tex").write_text(f"\\documentclass[{paper}]{{article}}\n\\usepackage{{longtable,array,amsmath}}\n"
-                                      "\\begin{document}\n" + "\n".join(inputs) + "\n\\end{document}\n", encoding="utf-8")
-    run = subprocess.run(["pdflatex", "-interaction=nonstopmode", "-halt-on-error", "doc.tex"], cwd=tmp_path,
+    folder, inputs = builtin_latex_folder
+    (folder / f"{paper}.tex").write_text(f"\\documentclass[{paper}]{{article}}\n\\usepackage{{longtable,array,amsmath}}\n"
+                                         "\\begin{document}\n" + "\n".join(inputs) + "\n\\end{document}\n", encoding="utf-8")
+    run = subprocess.run(["pdflatex", "-interaction=nonstopmode", "-halt-on-error", f"{paper}.tex"], cwd=folder,
                          capture_output=True, text=True, timeout=300)
-    log = (tmp_path / "doc.log").read_text(encoding="utf-8", errors="replace")
+    log = (folder / f"{paper}.log").read_text(encoding="utf-8", errors="replace")
     assert run.returncode == 0, log[-2000:]
     assert [line for line in log.splitlines() if line.startswith("Overfull \\hbox")] == []
 
