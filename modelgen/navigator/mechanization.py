@@ -39,7 +39,7 @@ import numpy as np
 
 from modelgen.simulation.earth import normal_gravity as gravity  # Somigliana with the free-air terms, +Down
 from modelgen.simulation.earth import radii_of_curvature as radii  # R_M, R_N
-from modelgen.simulation.jit import HAVE_NUMBA, compiled
+from modelgen.simulation.jit import HAVE_NUMBA, compiled, compiled_in_memory
 
 NAV_SIZE = 10  # q0 q1 q2 q3, vN vE vD, latitude, longitude, height
 
@@ -97,7 +97,7 @@ def _multiply(a0, a1, a2, a3, b0, b1, b2, b3):
             a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0)
 
 
-@compiled
+@compiled_in_memory  # it takes the model's run-time compiled rates: no disk cache (see compiled_in_memory)
 def mechanize(nav: np.ndarray, history: np.ndarray, time: np.ndarray, force: np.ndarray, rate: np.ndarray,
               start: int, stop: int, gyro_bias: np.ndarray, accel_bias: np.ndarray, mean_force: np.ndarray,
               gyro_scale: np.ndarray, accel_scale: np.ndarray, rates) -> None:

@@ -31,6 +31,21 @@ def compiled(function: F) -> F:
     return _numba.njit(cache=True, fastmath=False, nogil=True)(function)  # type: ignore[return-value]
 
 
+def compiled_in_memory(function: F) -> F:
+    """``numba.njit`` without the disk cache if numba is installed, else the function itself.
+
+    For a loop that takes a function compiled at run time as an argument (the
+    navigator's ``mechanize`` and a model's generated ``navigation_rates``):
+    each specialization names that function's type, which no later process
+    has, so a disk entry could never be reused, and numba's cache index, which
+    pickles every specialization's type, fails once an earlier model's
+    function has been freed ("underlying object has vanished").
+    """
+    if _numba is None:
+        return function
+    return _numba.njit(fastmath=False, nogil=True)(function)  # type: ignore[return-value]
+
+
 def inlined(function: F) -> F:
     """:func:`compiled`, and inlined by numba into its compiled callers (no call: arguments and tuples stay in registers).
 

@@ -44,6 +44,34 @@ def test_mechanization_at_rest_with_ideal_sensors_stays_at_rest():
     assert abs(nav[7] - lat) * 6.37e6 < 0.03 and abs(nav[9] - h) < 0.03
 
 
+def test_mechanize_flies_a_second_models_rates_after_the_first_models_are_freed():
+    """Run-time compiled rates in one process, each freed before the next is flown (as when a process flies one
+    model, then another): the same flight each time.  (The suite once failed here when mechanize kept a disk cache:
+    numba pickled its index with a freed function's type in it; this does not reproduce that on its own.)"""
+    import gc
+
+    from modelgen.fileio.datafiles import package_path
+    from modelgen.navigator.mechanization import model_rates
+    from modelgen.navigator.spec import navigator_spec
+
+    source = navigator_spec(package_path("navigator", "models", "ins_gps15_nav.yaml"), with_python=False).rates_python
+    lat, h, n = math.radians(40.0), 1600.0, 101
+    time = np.arange(n) * 0.01
+    force = np.tile([0.0, 0.0, -gravity(lat, h)], (n, 1))
+    rate = np.tile([EARTH_RATE * math.cos(lat), 0.0, -EARTH_RATE * math.sin(lat)], (n, 1))
+    finals = []
+    for name in ("first", "second", "third"):
+        rates = model_rates(source, name)
+        nav = np.zeros(NAV_SIZE)
+        nav[0], nav[7], nav[9] = 1.0, lat, h
+        mechanize(nav, np.zeros(6), time, force, rate, 1, n, np.zeros(3), np.zeros(3), np.zeros(4), np.zeros(3),
+                  np.zeros(3), rates)
+        finals.append(nav)
+        del rates
+        gc.collect()
+    assert np.array_equal(finals[0], finals[1]) and np.array_equal(finals[1], finals[2])
+
+
 def test_mechanization_integrates_a_constant_forward_acceleration():
     """1 m/s^2 forward (north) for 10 s from rest: 10 m/s and 50 m, to the earth-rate terms."""
     lat, h = math.radians(40.0), 1600.0
