@@ -109,30 +109,35 @@ def update_period(time: np.ndarray) -> float:
     return float(np.median(np.diff(time)))
 
 
+def lagged_pairs(time: np.ndarray, x: np.ndarray, period: float, max_lag_s: float = MAX_LAG_S):
+    """For k = 0 .. max lag: (k, x_t, x_{t+k}) over the samples of ``x`` exactly k update periods apart.
+
+    The series is put on the grid time[0] + n T (a sample off the grid by a quarter period or more is left out), so
+    that a gap in the updates leaves out the pairs across it instead of pairing samples at other lags."""
+    time = np.asarray(time, float)
+    x = np.asarray(x, float)
+    steps = np.round((time - time[0]) / period).astype(np.int64)
+    on_grid = np.abs((time - time[0]) - steps * period) < 0.25 * period
+    steps, values = steps[on_grid], x[on_grid]
+    where = np.full(int(steps[-1]) + 1 if len(steps) else 0, -1, dtype=np.int64)  # grid step -> sample, or -1
+    where[steps] = np.arange(len(steps))
+    for k in range(int(round(max_lag_s / period)) + 1):
+        partner = np.where(steps + k < len(where), where[np.minimum(steps + k, len(where) - 1)], -1)
+        ok = partner >= 0
+        yield k, values[ok], values[partner[ok]]
+
+
 def autocorrelation(time: np.ndarray, e: np.ndarray, period: float, max_lag_s: float = MAX_LAG_S) -> np.ndarray:
     """rho_k, k = 0 .. max lag, of a standardized series sampled at ``time`` (pairs exactly k periods apart).
 
-    Zero-mean by the filter's assumption (not demeaned: a persistent offset is correlation too).  A lag with no
-    pair is NaN.
+    Zero-mean by the filter's assumption (not demeaned: a persistent offset is correlation too).  A lag with fewer
+    than 10 pairs is NaN.
     """
-    time = np.asarray(time, float)
-    e = np.asarray(e, float)
-    steps = np.round((time - time[0]) / period).astype(np.int64)
-    on_grid = np.abs((time - time[0]) - steps * period) < 0.25 * period
-    steps, values = steps[on_grid], e[on_grid]
-    index = {int(s): i for i, s in enumerate(steps)}
-    n_lags = int(round(max_lag_s / period))
-    energy = float(np.sum(values**2))
-    rho = np.full(n_lags + 1, np.nan)
+    rho = np.full(int(round(max_lag_s / period)) + 1, np.nan)
     rho[0] = 1.0
-    for k in range(1, n_lags + 1):
-        partner = np.array([index.get(int(s) + k, -1) for s in steps])
-        ok = partner >= 0
-        if ok.sum() < 10:
-            continue
-        # normalised by the energy of the pairs' own samples (an unbiased estimate over gappy series)
-        a, b = values[ok], values[partner[ok]]
-        rho[k] = float(np.sum(a * b) / math.sqrt(np.sum(a**2) * np.sum(b**2)))
+    for k, a, b in lagged_pairs(time, e, period, max_lag_s):
+        if k and len(a) >= 10:  # normalised by the energy of the pairs' own samples (unbiased over gappy series)
+            rho[k] = float(np.sum(a * b) / math.sqrt(np.sum(a**2) * np.sum(b**2)))
     return rho
 
 
@@ -162,20 +167,11 @@ def decorrelation_time(rho: np.ndarray, period: float) -> float:
 
 def autocovariance(time: np.ndarray, x: np.ndarray, period: float, max_lag_s: float = MAX_LAG_S) -> np.ndarray:
     """C_k, k = 0 .. max lag, of a series sampled at ``time``: mean of x_t x_{t+k} over the pairs exactly k periods
-    apart (not demeaned, as :func:`autocorrelation`); NaN where a lag has fewer than 10 pairs."""
-    time = np.asarray(time, float)
-    x = np.asarray(x, float)
-    steps = np.round((time - time[0]) / period).astype(np.int64)
-    on_grid = np.abs((time - time[0]) - steps * period) < 0.25 * period
-    steps, values = steps[on_grid], x[on_grid]
-    where = np.full(int(steps[-1]) + 1 if len(steps) else 0, -1, dtype=np.int64)
-    where[steps] = np.arange(len(steps))
+    apart (:func:`lagged_pairs`; not demeaned, as :func:`autocorrelation`); NaN where a lag has fewer than 10 pairs."""
     out = np.full(int(round(max_lag_s / period)) + 1, np.nan)
-    for k in range(len(out)):
-        partner = np.where(steps + k < len(where), where[np.minimum(steps + k, len(where) - 1)], -1)
-        ok = partner >= 0
-        if ok.sum() >= 10:
-            out[k] = float(np.mean(values[ok] * values[partner[ok]]))
+    for k, a, b in lagged_pairs(time, x, period, max_lag_s):
+        if len(a) >= 10:
+            out[k] = float(np.mean(a * b))
     return out
 
 
