@@ -198,6 +198,49 @@ def pack(field_values: dict, n_parameters: int) -> bytes:
 #: from the configuration and the log: WINDOW_MAX the zero-velocity detector's window (modelgen.navigator.cnav.
 #: window_capacity), REST_MAX the alignment ring (cnav.rest_capacity)
 WINDOW_MAX = 256
+#: the range of the struct's 32-bit ints: a larger count (a window of days) is refused before it is packed, where
+#: it would wrap to a value the C's own check could not tell from a good one
+C_INT_MIN, C_INT_MAX = -2**31, 2**31 - 1
+
+
+#: the alignment ring's default capacity (IMU samples; ``<P>_NAV_REST_MAX``)
+REST_MAX = 1024
+
+
+def rest_capacity(rest_window_s: float, still_window_s: float, zupt_window_s: float, time) -> int:
+    """The alignment ring a log needs: every rest window and the detectors' windows fit.
+
+    The most samples in any ``rest_window_s`` span of the log plus two (the epoch's own sample), at least the
+    still detector's and the ZUPT's windows plus one, but never more than the log's own samples need (a window
+    longer than the log is refused by its field's bound, not given a ring of its size); rounded up to a power of
+    two, at least :data:`REST_MAX`.
+    """
+    import numpy as np
+
+    time = np.asarray(time, float)
+    need = int(np.max(np.arange(len(time)) - np.searchsorted(time, time - rest_window_s, side="left"))) + 3
+    median_dt = float(np.median(np.diff(time)))
+
+    def samples(window_s: float) -> int:
+        return min(max(WINDOW_SAMPLES_MIN, int(round(window_s / median_dt))), len(time)) + 1
+
+    need = max(need, samples(still_window_s), samples(zupt_window_s))
+    return max(REST_MAX, 1 << (need - 1).bit_length())
+
+
+def window_capacity(zupt_window_s: float, time) -> int:
+    """The zero-velocity detector's window buffer a log needs: the ZUPT window's samples at the log's median IMU
+    rate (as the configuration's field is computed) plus one, rounded up to a power of two, at least
+    :data:`WINDOW_MAX`; never more than the log's own samples need (a window longer than the log is refused by the
+    field's bound, not given a buffer of its size).  A 1 kHz IMU with a 0.5-s window needs 512."""
+    import numpy as np
+
+    time = np.asarray(time, float)
+    median_dt = float(np.median(np.diff(time)))
+    need = min(max(WINDOW_SAMPLES_MIN, int(round(zupt_window_s / median_dt))), len(time)) + 1
+    return max(WINDOW_MAX, 1 << (need - 1).bit_length())
+
+
 #: the status of the first refused field is CONFIG_STATUS_BASE + its index in FIELDS (``<P>_NAV_ERR_CONFIG_<NAME>``)
 CONFIG_STATUS_BASE = 32
 
@@ -336,6 +379,8 @@ def _accepts(item: Field, x: float, field_values: dict, capacities: dict) -> boo
 
     low, high = number(b.low), number(b.high)
     if b.finite and not math.isfinite(x):
+        return False
+    if item.ctype == "int" and not C_INT_MIN <= x <= C_INT_MAX:  # would wrap in the struct's 32-bit int
         return False
     if low is not None and not (x > low if b.low_open else x >= low):
         return False

@@ -47,7 +47,7 @@ COUNT_NAMES = ("gnss_updates", "gnss_rejected", "gnss_released", "gnss_deweighte
 ALIGNMENT_NAMES = ("time", "roll", "pitch", "heading", "rest_end", "rest_samples", "rest_start", "motion_time")
 #: IMU samples the C keeps for its alignment by default ({P}_NAV_REST_MAX in the header); a configuration whose
 #: rest window needs more is built with a larger ring (:func:`rest_capacity`, -D{P}_NAV_REST_MAX)
-REST_MAX = 1024
+REST_MAX = cconfig.REST_MAX
 #: the zero-velocity detector's window buffer by default ({P}_NAV_WINDOW_MAX); a configuration whose ZUPT window
 #: needs more samples is built with a larger one (:func:`window_capacity`, -D{P}_NAV_WINDOW_MAX)
 WINDOW_MAX = cconfig.WINDOW_MAX
@@ -262,26 +262,14 @@ def build_c_navigator(spec: NavigatorSpec, folder: Path, rest_max: int = REST_MA
 
 
 def rest_capacity(config: NavigatorConfig, time: np.ndarray) -> int:
-    """The ring the C needs for this configuration and log: every rest window and the detectors' windows fit.
-
-    The most samples in any ``rest_window_s`` span of the log plus two (the epoch's own sample), at least the
-    still detector's and the ZUPT's windows plus one; rounded up to a power of two, at least :data:`REST_MAX`.
-    """
-    time = np.asarray(time, float)
-    need = int(np.max(np.arange(len(time)) - np.searchsorted(time, time - config.rest_window, side="left"))) + 3
-    median_dt = float(np.median(np.diff(time)))
-    need = max(need, max(WINDOW_SAMPLES_MIN, int(round(config.still_window / median_dt))) + 1,
-               max(WINDOW_SAMPLES_MIN, int(round(config.zupt_window / median_dt))) + 1)
-    return max(REST_MAX, 1 << (need - 1).bit_length())
+    """The alignment ring the C needs for this configuration and log (:func:`modelgen.navigator.cconfig.rest_capacity`)."""
+    return cconfig.rest_capacity(config.rest_window, config.still_window, config.zupt_window, time)
 
 
 def window_capacity(config: NavigatorConfig, time: np.ndarray) -> int:
-    """The zero-velocity detector's window buffer the C needs: the ZUPT window's samples at the log's median IMU
-    rate (as the configuration's field is computed) plus one, rounded up to a power of two, at least
-    :data:`WINDOW_MAX`.  A 1 kHz IMU with a 0.5-s window needs 512."""
-    median_dt = float(np.median(np.diff(np.asarray(time, float))))
-    need = max(WINDOW_SAMPLES_MIN, int(round(config.zupt_window / median_dt))) + 1
-    return max(WINDOW_MAX, 1 << (need - 1).bit_length())
+    """The zero-velocity detector's window buffer the C needs for this configuration and log
+    (:func:`modelgen.navigator.cconfig.window_capacity`)."""
+    return cconfig.window_capacity(config.zupt_window, time)
 
 
 def cache_folder() -> Path:
@@ -580,6 +568,10 @@ def fly_c(config: NavigatorConfig, inputs: Inputs, navigator: CNavigator, record
         raise ModelError(f"{config.path}: this configuration's zero-velocity window needs a detector buffer of "
                          f"{a.window_max} IMU samples; the C navigator was built with {navigator.window_max} "
                          "(cached_c_navigator(window_max=))")
+    built = capacities(navigator.rest_max, navigator.window_max)
+    refused = cconfig.check(a.cfg, built)  # the C's own check, before packing (a count past 32 bits would wrap)
+    if refused is not None:
+        raise cconfig.refusal(config.path, refused, a.cfg[refused.name], built, "C")
     state = ctypes.create_string_buffer(navigator.size)
     struct = cconfig.to_structure(a.cfg, a.n_parameters)
     status = navigator.configure(state, ctypes.byref(struct))

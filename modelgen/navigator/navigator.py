@@ -259,12 +259,13 @@ def fly(config: NavigatorConfig, inputs: Inputs, spec: NavigatorSpec,
 
     values = cconfig.values(config, spec, max(WINDOW_SAMPLES_MIN, int(round(config.zupt_window / median_dt))), step,
                             still_window_samples(config, time), table)
-    # the C navigator's own configuration check (cconfig.bounds), so that both refuse the same configurations; its
-    # buffers' capacities are the C's alone (the alignment ring and the detector window are sized from the
-    # configuration and the log: cnav.rest_capacity, cnav.window_capacity), so they bound nothing here
-    refused = cconfig.check(values, {})
+    # the C navigator's own configuration check (cconfig.bounds), so that both refuse the same configurations,
+    # with the buffers the C gets for this log (a window longer than the log is refused)
+    capacities = {"WINDOW_MAX": cconfig.window_capacity(config.zupt_window, time),
+                  "REST_MAX": cconfig.rest_capacity(config.rest_window, config.still_window, config.zupt_window, time)}
+    refused = cconfig.check(values, capacities)
     if refused is not None:
-        raise cconfig.refusal(config.path, refused, values[refused.name], {}, "Python")
+        raise cconfig.refusal(config.path, refused, values[refused.name], capacities, "Python")
     cfg = cconfig.namespace(values)
     speed0 = float(np.hypot(g.velocity[j0, 0], g.velocity[j0, 1]))
     sv = float(np.hypot(g.sigma_velocity[j0, 0], g.sigma_velocity[j0, 1]))
