@@ -423,13 +423,13 @@ def describe(item: Field, capacities: dict) -> str:
 def refusal(config_path: str, item: Field, value, capacities: dict, who: str, status: int | None = None) -> ModelError:
     """The one error of a configuration the navigator (``who``: 'C' or 'Python') refuses: the key's file:line, the
     field, its value and its bounds (and the C's status)."""
-    from modelgen.fileio.datafiles import read_yaml_with_lines
     from modelgen.navigator.config import _Reader
+    from modelgen.navigator.config_bases import read_config_with_bases
 
     key = item.key or item.origin or item.name
     where = str(config_path)
     try:
-        data, lines = read_yaml_with_lines(Path(config_path), "navigator configuration file")
+        data, lines = read_config_with_bases(config_path)
         where = _Reader(Path(config_path), data, lines).where(key)
     except (ModelError, OSError):
         pass

@@ -19,7 +19,8 @@ from typing import Any
 
 
 from modelgen.errors import ModelError
-from modelgen.fileio.datafiles import data_path, read_yaml_with_lines
+from modelgen.fileio.datafiles import data_path
+from modelgen.navigator.config_bases import origin_of, read_config_with_bases
 from modelgen.navigator.config_schema import key_sets, validate
 from modelgen.navigator.logs import GAP_ACTIONS, STANDARD_GRAVITY, ImuColumns, LogSource, source_from_config
 from modelgen.navigator.logs.imu_csv import columns_of
@@ -139,6 +140,16 @@ class NavigatorConfig:
     gnss_velocity_variance_factor: float = 1.0
     #: tuning: dotted key -> how its value was obtained (printed in the summary)
     tuning: dict[str, str] = field(default_factory=dict)
+    #: dotted key -> 'file:line' that gave it (a base's line for a value inherited through extends:)
+    key_lines: dict[str, str] = field(default_factory=dict, repr=False, compare=False)
+
+    def where(self, key: str) -> str:
+        """'file:line' of a key path (or its closest enclosing key), or the configuration file."""
+        return _Reader(Path(self.path), {}, self.key_lines).where(key)
+
+    def origin(self, key: str) -> Path:
+        """The configuration file that gives ``key`` (a base's, for a value inherited through extends:)."""
+        return origin_of(self.key_lines, key, Path(self.path))
 
     @property
     def rest_span_min(self) -> float:
@@ -236,10 +247,14 @@ class _Reader:
             raise ModelError(f"{self.where(key)}: {key} must be a list of {length} finite numbers, got {value!r}")
         return tuple(float(v) for v in value)
 
+    def folder(self, key: str) -> Path:
+        """The folder relative paths at ``key`` start from: that of the file that wrote it (a base's, if inherited)."""
+        return origin_of(self.lines, key, self.path).parent
+
     def file(self, key: str) -> Path:
-        """A data file path, relative to the configuration's folder; it must exist."""
+        """A data file path, relative to the folder of the configuration that gives it; it must exist."""
         name = self.text(key)
-        path = (self.path.parent / name) if not Path(name).is_absolute() else Path(name)
+        path = (self.folder(key) / name) if not Path(name).is_absolute() else Path(name)
         if not path.is_file():
             raise ModelError(f"{self.where(key)}: {key}: no such file {str(path)!r}")
         return path
@@ -381,16 +396,16 @@ def _choice(reader: _Reader, key: str, choices: tuple[str, ...]) -> str:
 def load_config(path: str | Path) -> NavigatorConfig:
     """Read and validate a navigator configuration file."""
     path = Path(path)
-    data, lines = read_yaml_with_lines(path, "navigator configuration file")
+    data, lines = read_config_with_bases(path)
     r = _Reader(path, data, lines)
     _check_keys(r)
-    imu_source = source_from_config("imu", r.get("imu"), r.where, path.parent)
+    imu_source = source_from_config("imu", r.get("imu"), r.where, r.folder("imu.file"))
     columns = columns_of(imu_source) if imu_source.format == "csv" else None
     gap_action = r.text("imu.gap_action", "refuse")
     if gap_action not in GAP_ACTIONS:
         raise ModelError(f"{r.where('imu.gap_action')}: imu.gap_action must be one of {', '.join(GAP_ACTIONS)}, "
                          f"got {gap_action!r}")
-    gnss_source = source_from_config("gnss", r.get("gnss"), r.where, path.parent)
+    gnss_source = source_from_config("gnss", r.get("gnss"), r.where, r.folder("gnss.file"))
     quality_raw = r.get("gnss.quality_factor")
     if not isinstance(quality_raw, dict) or not quality_raw:
         raise ModelError(f"{r.where('gnss.quality_factor')}: gnss.quality_factor must map RTKLIB Q values to factors")
@@ -451,6 +466,7 @@ def load_config(path: str | Path) -> NavigatorConfig:
         gnss_position_variance_factor=r.number("gnss.position_variance_factor", 1.0, positive=True),
         gnss_velocity_variance_factor=r.number("gnss.velocity_variance_factor", 1.0, positive=True),
         tuning={str(k): str(v) for k, v in (r.get("tuning", None) or {}).items()},
+        key_lines=dict(lines),
     )
     validate(data, r.where)  # and what the checks above leave to the schema (types, ranges, required keys)
     return config
@@ -502,7 +518,7 @@ def _output_folder(reader: _Reader) -> Path | None:
     if name is None:
         return None
     name = reader.text("output.folder")
-    return Path(name) if Path(name).is_absolute() else reader.path.parent / name
+    return Path(name) if Path(name).is_absolute() else reader.folder("output.folder") / name
 
 
 def _ppm(reader: _Reader, key: str) -> float | None:

@@ -28,8 +28,9 @@ from modelgen.fileio.datafiles import package_path
 from modelgen.navigator.mechanization import dcm_to_quaternion, quaternion_to_dcm
 
 
-def model_path(name: str, config_path: str) -> Path:
-    """The model file: a built-in navigator model, a built-in modelgen model, or a path."""
+def model_path(name: str, config_path: str | Path, where: str | None = None) -> Path:
+    """The model file: a built-in navigator model, a built-in modelgen model, or a path relative to the folder of
+    ``config_path``, the configuration file naming it; ``where`` is the 'file:line' a refusal names."""
     here = package_path("navigator", "models", f"{name}.yaml")
     if here.is_file():
         return here
@@ -41,7 +42,7 @@ def model_path(name: str, config_path: str) -> Path:
     path = Path(config_path).parent / name
     if path.is_file():
         return path
-    raise ModelError(f"{config_path}: model {name!r} is neither a built-in model nor a file")
+    raise ModelError(f"{where or config_path}: model {name!r} is neither a built-in model nor a file")
 
 
 @dataclass

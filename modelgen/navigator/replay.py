@@ -87,7 +87,7 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
     for note in inputs.notes:
         echo(f"  note: {note}")
     timings["read_s"] = time.perf_counter() - start
-    model_file = model_path(config.model, config.path)
+    model_file = model_path(config.model, config.origin("model"), config.where("model"))
     check_navigation_model(config, model_file)
     flights: dict[str, Flight] = {}
     mark = time.perf_counter()
@@ -227,7 +227,7 @@ def check_navigation_model(config: NavigatorConfig, model_file: Path) -> None:
     data = read_yaml(model_file, "model file")
     if "navigation" in data:
         return
-    reference_file = model_path(BUILTIN_NAVIGATOR_MODEL, config.path)
+    reference_file = model_path(BUILTIN_NAVIGATOR_MODEL, config.origin("model"), config.where("model"))
     reference = read_yaml(reference_file, "model file")
     if "navigation" in reference:
         wanted = None  # the built-in navigator model is a navigation model itself: so must every model be
@@ -239,8 +239,7 @@ def check_navigation_model(config: NavigatorConfig, model_file: Path) -> None:
     need = ("a model with a navigation: section" if wanted is None else
             f"a model with a navigation: section, or the {len(wanted)} error states of {BUILTIN_NAVIGATOR_MODEL} "
             "in their order")
-    _, lines = read_yaml_with_lines(config.path, "navigator configuration file")  # where the model is named
-    raise ModelError(f"{lines.get('model', config.path)}: model {config.model!r} ({model_file}) is not a navigation model the replay "
+    raise ModelError(f"{config.where('model')}: model {config.model!r} ({model_file}) is not a navigation model the replay "
                      f"can fly: it needs {need}; this one has {len(states)} states ({', '.join(states[:4])}"
                      f"{', ...' if len(states) > 4 else ''}) and no navigation: section")
 

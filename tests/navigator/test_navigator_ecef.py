@@ -143,8 +143,7 @@ def test_the_cli_refuses_an_ecef_model_the_navigator_cannot_fly_with_one_located
 
     model = _ecef_model(tmp_path, "ecef_no_gnss", "  measurements: []\n")
     config = (DATA / "excerpt_ecef.yaml").read_text().replace("model: ins_gps15_ecef_nav", f"model: {model.name}")
-    config = config.replace("excerpt_imu.csv.gz", str(DATA / "excerpt_imu.csv.gz"))
-    config = config.replace("file: excerpt.pos", f"file: {DATA / 'excerpt.pos'}")
+    config = config.replace("extends: excerpt.yaml", f"extends: {DATA / 'excerpt.yaml'}")  # its logs: from there
     path = tmp_path / "replay.yaml"
     path.write_text(config)
     result = CliRunner().invoke(main, ["replay", str(path), "--no-figures", "--out", str(tmp_path / "out")])
