@@ -88,7 +88,7 @@ The method and the decision, written before any outage was flown with its result
    the numbers are not changed after.
 
 The Python navigator flies these flights: it is the one that records every update's innovation and its
-covariance (the generated C navigator does not hand them out).  Each flight's innovations are kept, so the
+covariance (the generated C navigator does not hand them out).  Each flight's statistics are kept, so the
 stage-4 measurement of an iteration is the last stage-5 flight of the one before, at no extra flight.
 
 No outage is flown and no outage error is computed here: the choice cannot
@@ -101,7 +101,7 @@ modelgen/data/replay_drive_0708.yaml by hand (with this script named there).
     python bench/navigator_tuning.py --likelihood [CONFIG] [--json FILE]    # stage 5 (about half an hour)
     python bench/navigator_tuning.py --markov [CONFIG] [--json FILE]        # stage 6 (about half an hour)
     python bench/navigator_tuning.py --markov-check [STAGE6_JSON] [--json FILE]   # stage 6b (a few minutes)
-    python bench/navigator_tuning.py --fixed-point [CONFIG] [--json FILE]   # stage 7 (both: about half an hour)
+    python bench/navigator_tuning.py --fixed-point [CONFIG] [--json FILE]   # stage 7 (both: about a quarter of an hour)
 """
 
 from __future__ import annotations
@@ -542,8 +542,9 @@ def _fixed_point_one(config_file: str) -> dict:
                          "correlation_factors": {t.key: t.factor for t in tuned},
                          "measured_at": iterates[-1]["values"], "search_evaluations": searched,
                          "log_likelihood": -float(result.fun)})
-        say(f"iteration {iteration}: " + ", ".join(f"{k.split('.')[-1] if 'noise' not in k else 'white'} "
-                                                    f"{v:.4g} (moved {100 * change[k]:.1f} %)" for k, v in values.items()))
+        say(f"iteration {iteration}: " + ", ".join(
+            f"{k.split('.')[-1] if 'noise' not in k else 'white'} {v:.4g} (moved {100 * change[k]:.1f} %)"
+            for k, v in values.items()))
         if max(change.values()) < FIXED_POINT_TOLERANCE:
             converged = True
             break
