@@ -60,6 +60,37 @@ white-noise factor, k = 1), beside a profile of log L over sigma_e at tau = 2 s 
 time): the augmented model is adopted only if it beats both 21-state configurations on AIC and BIC.  This
 check was added after stage 6's likelihoods were seen and before any outage was flown.
 
+Stage 7 (``--fixed-point [CONFIG] [--json FILE]``, issue 26): stages 4 and 5 to a fixed point.  Each was run
+once, from stage 1's filter (white-noise factor 7), and they do not agree with each other: stage 4's f was
+measured on a filter with other noise numbers than the shipped one (with the position R white, the white-noise
+factor's maximum likelihood is 39.4 and the position innovations' f there is 1.9-3.6, neither 1 nor 13.4).
+The method and the decision, written before any outage was flown with its result:
+
+1. start: the shipped configuration (CONFIG, or both built-in ones, 15 and 21 states, in two processes);
+2. iterate, with GNSS present everywhere (no outage flown, no outage error computed):
+   a. stage 4 on the current filter's own innovations: per row the integrated autocorrelation f of the
+      standardized innovations (:func:`modelgen.navigator.tuning.row_statistics`), and each stage-4 key set to
+      its white value (:data:`STAGE4_FROM`: variance factors 1, NHC 0.03 m/s, ZUPT 0.02 m/s) x f (a sigma x
+      sqrt(f)), f the mean over the key's rows (:func:`modelgen.navigator.tuning.tune`) -- the factor on the
+      white R, not a further factor on the current one;
+   b. stage 5 given those numbers: the white-noise factor at the maximum of the innovations' Gaussian
+      log-likelihood (:func:`modelgen.navigator.likelihood.log_likelihood`, every sensor), a 1-D bounded search
+      (scipy.optimize.minimize_scalar, Brent) over log10 of the factor within a factor 10**0.25 either side of
+      the current value (moved on if the maximum is at a bound), to 0.004 in log10 (1 %);
+   c. stop when every stage-4 number and the white-noise factor change by less than 2 % (relative) from one
+      iteration to the next (:data:`FIXED_POINT_TOLERANCE`), or after :data:`FIXED_POINT_ITERATIONS`
+      iterations (reported as not converged);
+3. decision: the shipped numbers become the last iterate -- a filter whose R factor (and NHC/ZUPT sigma) is
+   the correlation its own innovations show and whose white-noise factor is the maximum-likelihood estimate
+   given that R -- whatever the outage schedules then show; the correlation factors at that point are stated
+   beside the numbers (the residual of the fixed point), with log L, every sensor's NIS and each row's
+   whiteness.  The outage schedules are flown (``modelgen replay``) only after the numbers are written, and
+   the numbers are not changed after.
+
+The Python navigator flies these flights: it is the one that records every update's innovation and its
+covariance (the generated C navigator does not hand them out).  Each flight's statistics are kept, so the
+stage-4 measurement of an iteration is the last stage-5 flight of the one before, at no extra flight.
+
 No outage is flown and no outage error is computed here: the choice cannot
 see them.  Prints a table and the chosen values, which go into
 modelgen/data/replay_drive_0708.yaml by hand (with this script named there).
@@ -70,6 +101,7 @@ modelgen/data/replay_drive_0708.yaml by hand (with this script named there).
     python bench/navigator_tuning.py --likelihood [CONFIG] [--json FILE]    # stage 5 (about half an hour)
     python bench/navigator_tuning.py --markov [CONFIG] [--json FILE]        # stage 6 (about half an hour)
     python bench/navigator_tuning.py --markov-check [STAGE6_JSON] [--json FILE]   # stage 6b (a few minutes)
+    python bench/navigator_tuning.py --fixed-point [CONFIG] [--json FILE]   # stage 7 (both: about a quarter of an hour)
 """
 
 from __future__ import annotations
@@ -92,6 +124,13 @@ STAGE4_FROM = {"gnss_position_variance_factor": 1.0, "gnss_velocity_variance_fac
 NHC_SIGMAS = (0.03, 0.05, 0.1)
 #: the white-noise factor stage 1 chose (the filter stages 4 and 5 measure from)
 STAGE1_WHITE_FACTOR = 7.0
+#: stage 7: the relative change of every stage-4 number and of the white-noise factor below which the iteration
+#: has converged, and the most iterations (a stage 4 and a stage 5 each)
+FIXED_POINT_TOLERANCE = 0.02
+FIXED_POINT_ITERATIONS = 8
+#: stage 7's bounded search: half-width of the interval in log10 of the white-noise factor, and its tolerance
+FIXED_POINT_HALF_WIDTH = 0.25
+FIXED_POINT_XATOL = 0.004
 
 
 def _flight(args: tuple[float, float, float, str]) -> tuple[float, float, float, float, float]:
@@ -425,6 +464,145 @@ def markov_check(arguments: list[str]) -> None:
         print(f"written {out_json}")
 
 
+def _fixed_point_one(config_file: str) -> dict:
+    """Stage 7 on one configuration (module docstring): the iterates, the fixed point and its statistics."""
+    import time
+
+    from scipy.optimize import minimize_scalar
+
+    from modelgen.navigator import likelihood as ml
+    from modelgen.navigator import tuning
+    from modelgen.navigator.config import load_config
+    from modelgen.navigator.errorstate import model_path
+    from modelgen.navigator.logs import read_gnss, read_imu
+    from modelgen.navigator.navigator import prepare
+    from modelgen.navigator.spec import navigator_spec
+
+    shipped = load_config(config_file)
+    name = Path(str(shipped.path)).name
+    inputs = prepare(shipped, read_imu(shipped.imu_source, shipped.gap_factor, shipped.gap_action),
+                     read_gnss(shipped.gnss_source))
+    spec = navigator_spec(model_path(shipped.model, shipped.path))
+    labels = tuning.row_labels(spec)
+    white = dataclasses.replace(shipped, **STAGE4_FROM)  # the stage-4 keys at their white values
+    keys = tuple(tuning.CONFIG_FIELDS)
+    q_key = ml.PROCESS_NOISE[0]
+    started = time.time()
+    flights: dict[tuple, dict] = {}
+
+    def say(message: str) -> None:
+        print(f"[{name} {time.time() - started:6.0f} s] {message}", flush=True)
+
+    def values_of(config) -> dict[str, float]:
+        return {**{key: ml.parameter_value(config, key) for key in keys}, q_key: ml.parameter_value(config, q_key)}
+
+    def fly(config) -> dict:
+        """One flight with GNSS present: log L per sensor, NIS, row statistics (kept per configuration)."""
+        point = tuple(round(v, 9) for v in values_of(config).values())
+        if point not in flights:
+            sources, _ = tuning.record_innovations(config, inputs, spec)
+            flights[point] = {"log_likelihood": ml.log_likelihood(sources),
+                              "nis": [dataclasses.asdict(c) for c in tuning.consistency(sources)],
+                              "rows": tuning.row_statistics(sources, labels)}
+            say(f"flight {len(flights):3d}: log L {flights[point]['log_likelihood']['total']:10.1f}  "
+                f"{q_key.split('.')[1]} factor {values_of(config)[q_key]:.4g}")
+        return flights[point]
+
+    def relative(a: dict, b: dict) -> dict[str, float]:
+        return {key: abs(a[key] / b[key] - 1.0) for key in a}
+
+    current = shipped
+    iterates = [{"iteration": 0, "values": values_of(shipped), "note": "the shipped configuration"}]
+    converged = False
+    say(f"stage 7: {spec.name}, GNSS present everywhere, no outage flown; start {iterates[0]['values']}")
+    for iteration in range(1, FIXED_POINT_ITERATIONS + 1):
+        # a. stage 4 on the current filter's own innovations: white value x f
+        measured = fly(current)
+        tuned = tuning.tune(white, measured["rows"], spec)
+        stage4 = tuning.apply(current, tuned)
+        # b. stage 5 given those numbers: 1-D bounded search over log10 of the white-noise factor
+        q0 = ml.parameter_value(current, q_key)
+        centre, searched = math.log10(q0), 0
+        while True:
+            lo, hi = centre - FIXED_POINT_HALF_WIDTH, centre + FIXED_POINT_HALF_WIDTH
+            result = minimize_scalar(
+                lambda x: -fly(ml.with_parameters(stage4, {q_key: 10.0 ** x}))["log_likelihood"]["total"],
+                bounds=(lo, hi), method="bounded", options={"xatol": FIXED_POINT_XATOL})
+            searched += int(result.nfev)
+            at_bound = min(result.x - lo, hi - result.x) < 2 * FIXED_POINT_XATOL
+            if not at_bound or searched > 60:
+                break
+            centre = float(result.x)
+            say(f"  the maximum is at a bound of the interval (factor {10 ** result.x:.4g}): searched again around it")
+        q = 10.0 ** float(result.x)
+        current = ml.with_parameters(stage4, {q_key: q})
+        values = values_of(current)
+        change = relative(values, iterates[-1]["values"])
+        iterates.append({"iteration": iteration, "values": values, "change": change,
+                         "correlation_factors": {t.key: t.factor for t in tuned},
+                         "measured_at": iterates[-1]["values"], "search_evaluations": searched,
+                         "log_likelihood": -float(result.fun)})
+        say(f"iteration {iteration}: " + ", ".join(
+            f"{k.split('.')[-1] if 'noise' not in k else 'white'} {v:.4g} (moved {100 * change[k]:.1f} %)"
+            for k, v in values.items()))
+        if max(change.values()) < FIXED_POINT_TOLERANCE:
+            converged = True
+            break
+    at = fly(current)  # the last stage-5 flight: the fixed point's statistics
+    residual = tuning.tune(white, at["rows"], spec)
+    say(f"{'converged' if converged else 'NOT converged'} after {len(iterates) - 1} iterations, {len(flights)} flights")
+    return {"configuration": name, "model": spec.name, "tolerance": FIXED_POINT_TOLERANCE,
+            "max_iterations": FIXED_POINT_ITERATIONS, "white_values": dict(STAGE4_FROM), "converged": converged,
+            "iterations": len(iterates) - 1, "flights": len(flights), "iterates": iterates,
+            "fixed_point": values_of(current),
+            "log_likelihood": at["log_likelihood"], "nis": at["nis"],
+            "rows": [dataclasses.asdict(r) for r in at["rows"]],
+            "correlation_factors": {t.key: t.factor for t in residual},
+            "stage4_at_fixed_point": {t.key: t.after for t in residual},
+            "log_likelihood_shipped": fly(shipped)["log_likelihood"], "nis_shipped": fly(shipped)["nis"],
+            "states": spec.n_states,
+            "seconds": time.time() - started}
+
+
+def fixed_point(arguments: list[str]) -> None:
+    """Stage 7: stages 4 and 5 alternated to a fixed point (module docstring); both configurations in two
+    processes unless CONFIG is given."""
+    import json
+
+    from modelgen.fileio.datafiles import package_path
+
+    out_json, arguments = _json_option(arguments)
+    files = arguments or [str(package_path("data", "replay_drive_0708.yaml")),
+                          str(package_path("data", "replay_drive_0708_21.yaml"))]
+    with ProcessPoolExecutor(min(2, len(files))) as pool:
+        results = list(pool.map(_fixed_point_one, files))
+    for r in results:
+        print(f"stage 7: {r['configuration']} ({r['model']}): {'converged' if r['converged'] else 'NOT converged'} "
+              f"in {r['iterations']} iterations (tolerance {100 * r['tolerance']:g} %, cap {r['max_iterations']}), "
+              f"{r['flights']} flights")
+        for it in r["iterates"]:
+            print(f"  {it['iteration']}: " + ", ".join(f"{k} {v:.4g}" for k, v in it["values"].items()))
+        print("  the fixed point (shipped numbers) and the correlation factors its own innovations show:")
+        for key, value in r["fixed_point"].items():
+            f = r["correlation_factors"].get(key)
+            print(f"    {key}: {value:.4g}" + (f"  (f there {f:.2f}: {r['stage4_at_fixed_point'][key]:.4g})"
+                                              if f is not None else ""))
+        print(f"  log L {r['log_likelihood']['total']:.1f} (" +
+              ", ".join(f"{k} {v:.1f}" for k, v in r["log_likelihood"].items() if k != "total") + ")")
+        for c in r["nis"]:
+            print(f"  NIS {c['source']:8} rows {c['rows']}  updates {c['updates']:5d}  mean {c['mean']:7.2f}  "
+                  f"median {c['median']:6.2f}  inside 95 % {100 * c['inside_95']:5.1f} %")
+        print("  whiteness at the fixed point (stage 4's statistics):")
+        for st in r["rows"]:
+            print(f"    {st['source']:5} {st['label']:15} tau {st['tau_s']:6.2f} s  f {st['factor']:6.2f}")
+    if out_json:
+        for r in results:  # one file per configuration: FILE, or FILE_<states>.json for several
+            path = Path(out_json) if len(results) == 1 else Path(out_json).with_name(
+                f"{Path(out_json).stem}_{r['states']}.json")
+            path.write_text(json.dumps(r, indent=2, default=float) + "\n")
+            print(f"written {path}")
+
+
 if __name__ == "__main__":
     if sys.argv[1:] == ["--stage3"]:
         stage3()
@@ -436,5 +614,7 @@ if __name__ == "__main__":
         markov(sys.argv[2:])
     elif sys.argv[1:2] == ["--markov-check"]:
         markov_check(sys.argv[2:])
+    elif sys.argv[1:2] == ["--fixed-point"]:
+        fixed_point(sys.argv[2:])
     else:
         main()

@@ -113,24 +113,32 @@ CONFIG_FIELDS = {"gnss.position_variance_factor": "gnss_position_variance_factor
 
 
 @pytest.mark.parametrize("config_name, result_name", [
-    ("replay_drive_0708.yaml", "navigator_tuning_stage4_15.json"),
-    ("replay_drive_0708_21.yaml", "navigator_tuning_stage4_21.json")])
-def test_the_shipped_configurations_hold_the_numbers_stage_4_measured(config_name, result_name):
-    """Every key stage 4 tuned (bench/navigator_tuning.py --correlation --json, its result committed in
-    bench/results) holds that measured value in the shipped configuration to the 3 figures written there,
-    and the configuration's tuning: record names every such key."""
+    ("replay_drive_0708.yaml", "navigator_tuning_stage7_15.json"),
+    ("replay_drive_0708_21.yaml", "navigator_tuning_stage7_21.json")])
+def test_the_shipped_configurations_hold_the_fixed_point_of_stages_4_and_5(config_name, result_name):
+    """Every number stages 4 and 5 set, iterated to their fixed point (bench/navigator_tuning.py --fixed-point
+    --json, its result committed in bench/results), is held in the shipped configuration to the 3 figures written
+    there, and the configuration's tuning: record names every such key.  Each stage-4 number of the last iterate is
+    its white value x the correlation factor measured at the iterate before (a sigma x sqrt(f)): the factor on the
+    white R, not on the one before."""
     import json
 
+    from modelgen.navigator import likelihood
     from modelgen.navigator.config import builtin_config_path, load_config
 
     config = load_config(builtin_config_path().parent / config_name)
     result = json.loads((STAGE4_RESULTS / result_name).read_text())
-    assert result["model"] == config.model
-    assert {t["key"] for t in result["tuned"]} == set(CONFIG_FIELDS)
-    for tuned in result["tuned"]:
-        held = getattr(config, CONFIG_FIELDS[tuned["key"]])
-        assert held == pytest.approx(tuned["after"], rel=5e-3), tuned["key"]
-        assert tuned["key"] in config.tuning
+    assert result["model"] == config.model and result["configuration"] == config_name
+    assert set(result["fixed_point"]) == set(CONFIG_FIELDS) | set(likelihood.PROCESS_NOISE)
+    for key, value in result["fixed_point"].items():
+        assert likelihood.parameter_value(config, key) == pytest.approx(value, rel=5e-3), key
+        assert key in config.tuning
+    last = result["iterates"][-1]
+    assert last["values"] == result["fixed_point"] and last["iteration"] == result["iterations"]
+    assert result["converged"] == (max(last["change"].values()) < result["tolerance"])
+    for key, f in last["correlation_factors"].items():
+        power = 1.0 if key.startswith("gnss.") else 0.5
+        assert last["values"][key] == pytest.approx(result["white_values"][CONFIG_FIELDS[key]] * f**power, rel=1e-9)
 
 
 def test_a_tuning_statement_with_a_bar_and_a_newline_stays_one_table_row_of_the_summary():
