@@ -378,6 +378,17 @@ def _choice(reader: _Reader, key: str, choices: tuple[str, ...]) -> str:
     return value
 
 
+def key_place(config_path: str | Path, key: str) -> str:
+    """``file:line`` of ``key`` (or of its closest enclosing key) in the configuration file at ``config_path``, for a
+    refusal made after loading (the loaded configuration keeps values, not lines); the file alone if it cannot be
+    read again."""
+    try:
+        data, lines = read_yaml_with_lines(Path(config_path), "navigator configuration file")
+    except (ModelError, OSError):
+        return str(config_path)
+    return _Reader(Path(config_path), data, lines).where(key)
+
+
 def load_config(path: str | Path) -> NavigatorConfig:
     """Read and validate a navigator configuration file."""
     path = Path(path)
