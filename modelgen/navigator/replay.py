@@ -12,7 +12,7 @@ import numpy as np
 from modelgen.errors import ModelError
 from modelgen.navigator.cnav import GeneratedC, cached_c_navigator, fly_c, rest_capacity, window_capacity
 from modelgen.navigator.alignment import alignment_note
-from modelgen.navigator.config import NavigatorConfig, load_config
+from modelgen.navigator.config import NavigatorConfig, key_place, load_config
 from modelgen.navigator.errorstate import model_path
 from modelgen.navigator.logs import read_gnss, read_imu
 from modelgen.navigator.metrics import (errors_against_reference, pooled_consistency, schedule_record, summary,
@@ -221,7 +221,7 @@ def check_navigation_model(config: NavigatorConfig, model_file: Path) -> None:
     A model with a ``navigation:`` section is the navigator's to generate; a model without one flies only with
     the error states of the built-in navigator model, in its order (the hand-written error-state layout).
     """
-    from modelgen.fileio.datafiles import read_yaml, read_yaml_with_lines
+    from modelgen.fileio.datafiles import read_yaml
     from modelgen.model.loading import load_model
 
     data = read_yaml(model_file, "model file")
@@ -239,8 +239,7 @@ def check_navigation_model(config: NavigatorConfig, model_file: Path) -> None:
     need = ("a model with a navigation: section" if wanted is None else
             f"a model with a navigation: section, or the {len(wanted)} error states of {BUILTIN_NAVIGATOR_MODEL} "
             "in their order")
-    _, lines = read_yaml_with_lines(config.path, "navigator configuration file")  # where the model is named
-    raise ModelError(f"{lines.get('model', config.path)}: model {config.model!r} ({model_file}) is not a navigation model the replay "
+    raise ModelError(f"{key_place(config.path, 'model')}: model {config.model!r} ({model_file}) is not a navigation model the replay "
                      f"can fly: it needs {need}; this one has {len(states)} states ({', '.join(states[:4])}"
                      f"{', ...' if len(states) > 4 else ''}) and no navigation: section")
 
