@@ -280,8 +280,11 @@ def _check_ud_variances(derived: DerivedModel, scenario: CheckScenario, options:
     variances = np.diag(derived.numeric(scenario.parameters)["R"])
     for measurement, variance in zip(derived.model.measurements, variances):
         if not variance > 0.0:
+            # the measurement's own variance line (its noise entry); a model built in code has none: the check: section's
+            place = measurement.place("variance")
+            where, scenario_at = (f"{place}: ", f", from {scenario.where}" if scenario.where else "") if place else (_located(scenario), "")
             raise ModelError(
-                f"{_located(scenario)}measurement {measurement.name!r} has variance {variance:g} at the check scenario ({scenario.label}): "
+                f"{where}measurement {measurement.name!r} has variance {variance:g} at the check scenario ({scenario.label}{scenario_at}): "
                 "the UD form's Bierman update needs every variance positive (form 'covariance' takes a variance 0)"
             )
 

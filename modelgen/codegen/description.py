@@ -319,6 +319,9 @@ def model_hash(model) -> str:
     declaration.pop("navigation", None)
     declaration.pop("neglected", None)  # what the derivation dropped, carried on the model: not part of the declaration
     declaration.pop("attitude_reset", None)  # derived from the declaration's error definition, like the neglected terms
+    for kind in ("states", "noises", "parameters", "measurements"):
+        for item in declaration.get(kind) or ():
+            item.pop("places", None)  # where the file declared it: not the declaration
     if isinstance(declaration.get("check"), dict):
         declaration["check"].pop("where", None)  # where the file that declared it lies: not the declaration
     canonical = json.dumps(declaration, sort_keys=True, default=repr, ensure_ascii=True)
@@ -336,7 +339,9 @@ def index_names(model) -> dict[str, list[dict[str, str]]]:
         upper = [q.name.upper() for q in items]
         if len(set(upper)) != len(upper):
             clash = sorted({u for u in upper if upper.count(u) > 1})
-            raise ModelError(f"model {model.name!r}: {kind} names differ only in case ({', '.join(clash)}); index names would clash")
+            second = next(q for j, q in enumerate(items) if upper[j] in upper[:j])  # the entry that repeats one before it
+            at = f"{second.place()}: " if second.place() else ""
+            raise ModelError(f"{at}model {model.name!r}: {kind} names differ only in case ({', '.join(clash)}); index names would clash")
         out[kind] = [{"name": q.name, "index": u, "unit": q.unit, "description": q.description} for q, u in zip(items, upper)]
     return out
 

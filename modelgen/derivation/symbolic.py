@@ -125,7 +125,8 @@ def parameter_vector(model: ErrorModel, values: Mapping[str, float]) -> list[flo
         elif p.value is not None:
             v = p.value
         else:
-            raise ModelError(f"model {model.name!r}: no value for parameter {p.name!r} ({p.symbol})")
+            at = f"{p.place()}: " if p.place() else ""  # its declaration, which gives no value
+            raise ModelError(f"{at}model {model.name!r}: no value for parameter {p.name!r} ({p.symbol})")
         v = float(v)
         if not np.isfinite(v):
             raise ModelError(f"model {model.name!r}: parameter {p.name!r} is not finite ({v})")

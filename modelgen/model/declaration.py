@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import keyword
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Iterable, Mapping
 
 import sympy as sp
@@ -135,10 +135,19 @@ class Quantity:
     unit: str = "1"
     description: str = ""
     symbol: str = ""
+    #: Where a model file declared it: ``file:line`` by field (``""`` the entry, ``"psd"``, ``"variance"``,
+    #: ``"expression"``, ``"value"``, ``"dynamics"``), set by :meth:`ErrorModel.build` from the loader's line map, so
+    #: that a refusal made after loading (code generation, a check, the navigator) names the line; empty for an
+    #: item built in code.  No part of the declaration (not compared, not in the model hash).
+    places: Mapping[str, str] = field(default_factory=dict, compare=False, repr=False, kw_only=True)
 
     def __post_init__(self) -> None:
         if not self.symbol:
             object.__setattr__(self, "symbol", self.name)
+
+    def place(self, key: str = "") -> str:
+        """``file:line`` of this item's ``key`` field (of the entry if that field has no line of its own), or ``""``."""
+        return self.places.get(key) or self.places.get("", "")
 
     @property
     def sym(self) -> sp.Symbol:
@@ -358,6 +367,10 @@ class ErrorModel:
             _check_linear(
                 meas_expr[m.name], state_symbols, where(f"measurements[{i}].expression", f"measurement {m.name!r}"), "error states"
             )
+        if locations:
+            states, noises = _placed(states, "states", locations), _placed(noises, "noises", locations, ("psd",))
+            parameters = _placed(parameters, "parameters", locations, ("value",))
+            measurements = _placed(measurements, "measurements", locations, ("expression", "variance"))
         return cls(
             name=name,
             states=states,
@@ -373,6 +386,19 @@ class ErrorModel:
             frame=frame,
             notes=notes,
         )
+
+
+def _placed(items: tuple, kind: str, locations: Mapping[str, str], fields: tuple[str, ...] = ()) -> tuple:
+    """``items`` with the lines of ``locations`` (keys ``states[2]``, ``noises[0].psd``, ``dynamics.<state>``) as their
+    :attr:`Quantity.places`; an item with no line there keeps its own (one carried over from a base model)."""
+    out = []
+    for i, q in enumerate(items):
+        keys = {"": f"{kind}[{i}]", **{f: f"{kind}[{i}].{f}" for f in fields}}
+        if kind == "states":
+            keys["dynamics"] = f"dynamics.{q.name}" if f"dynamics.{q.name}" in locations else f"dynamics.{q.symbol}"
+        places = {f: locations[k] for f, k in keys.items() if locations.get(k)}
+        out.append(replace(q, places=places) if places else q)
+    return tuple(out)
 
 
 class _Locator:

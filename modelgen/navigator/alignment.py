@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from modelgen.errors import ModelError
-from modelgen.navigator.config import NavigatorConfig
+from modelgen.navigator.config import NavigatorConfig, key_place
 from modelgen.navigator.mechanization import (NAV_SIZE, dcm_to_quaternion, euler_to_dcm, gravity,
                                               level_from_accelerometers, radii)
 from modelgen.navigator.outages import in_outage, outage_windows
@@ -84,6 +84,21 @@ def still_window_samples(config: NavigatorConfig, time: np.ndarray) -> int:
     from modelgen.navigator.cconfig_fields import WINDOW_SAMPLES_MIN
 
     return max(WINDOW_SAMPLES_MIN, int(round(config.still_window / float(np.median(np.diff(time))))))
+
+
+def check_still_window(config: NavigatorConfig, time: np.ndarray) -> None:
+    """Refuse a still detector window longer than the whole IMU log, naming the line of alignment.still_window_s.
+
+    No sample of such a log can be called still, so no rest window could level the IMU: said as what the
+    configuration asks, not left to the alignment's diagnosis (which names no configuration line) or to the C's
+    bound on its ring (which a window between the log's length and the ring's power-of-two size passes)."""
+    size = still_window_samples(config, time)
+    if size > len(time):
+        key = "alignment.still_window_s"
+        raise ModelError(f"{key_place(config.path, key)}: {key}: the still detector's window of {config.still_window:g} s "
+                         f"is {size} IMU samples, more than the whole IMU log has ({len(time)} samples, "
+                         f"{float(time[-1] - time[0]):.3g} s): no sample could be called still, so the IMU could not "
+                         "be levelled at rest; give a window shorter than the log")
 
 
 def still_samples(force: np.ndarray, rate: np.ndarray, size: int, gyro_std_max: float,

@@ -15,7 +15,6 @@ from __future__ import annotations
 import ctypes
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -423,16 +422,10 @@ def describe(item: Field, capacities: dict) -> str:
 def refusal(config_path: str, item: Field, value, capacities: dict, who: str, status: int | None = None) -> ModelError:
     """The one error of a configuration the navigator (``who``: 'C' or 'Python') refuses: the key's file:line, the
     field, its value and its bounds (and the C's status)."""
-    from modelgen.navigator.config import _Reader
-    from modelgen.navigator.config_bases import read_config_with_bases
+    from modelgen.navigator.config import key_place
 
     key = item.key or item.origin or item.name
-    where = str(config_path)
-    try:
-        data, lines = read_config_with_bases(config_path)
-        where = _Reader(Path(config_path), data, lines).where(key)
-    except (ModelError, OSError):
-        pass
+    where = key_place(config_path, key)
     code = f" (status {status_name(item)} = {status})" if status is not None else ""
     return ModelError(f"{where}: {key}: the {who} navigator refuses its configuration field {item.name} = "
                       f"{_shown(value)}{code}: it must be {describe(item, capacities)}")

@@ -393,6 +393,17 @@ def _choice(reader: _Reader, key: str, choices: tuple[str, ...]) -> str:
     return value
 
 
+def key_place(config_path: str | Path, key: str) -> str:
+    """``file:line`` of ``key`` (or of its closest enclosing key) in the configuration file at ``config_path``, for a
+    refusal made after loading (from the configuration file alone, as the C and Python navigators' refusals have only its path); the file alone if it cannot be
+    read again."""
+    try:
+        data, lines = read_config_with_bases(config_path)  # an inherited key: the line of the base that gives it
+    except (ModelError, OSError):
+        return str(config_path)
+    return _Reader(Path(config_path), data, lines).where(key)
+
+
 def load_config(path: str | Path) -> NavigatorConfig:
     """Read and validate a navigator configuration file."""
     path = Path(path)

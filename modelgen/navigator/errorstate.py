@@ -42,7 +42,9 @@ def model_path(name: str, config_path: str | Path, where: str | None = None) -> 
     path = Path(config_path).parent / name
     if path.is_file():
         return path
-    raise ModelError(f"{where or config_path}: model {name!r} is neither a built-in model nor a file")
+    from modelgen.navigator.config import key_place
+
+    raise ModelError(f"{where or key_place(config_path, 'model')}: model {name!r} is neither a built-in model nor a file")
 
 
 @dataclass

@@ -106,6 +106,9 @@ def prepare(config: NavigatorConfig, imu: ImuLog, gnss: GnssLog) -> Inputs:
                    gnss.sigma_velocity[keep], gnss.notes)
     for log in aiding.values():
         notes.extend(log.notes)
+    from modelgen.navigator.alignment import check_still_window
+
+    check_still_window(config, time)  # a window longer than the log, refused before any navigator is built
     return Inputs(time, imu.specific_force @ to_imu, imu.angular_rate @ to_imu, kept, notes, float(gnss.time[0]), gnss,
                   aiding)
 

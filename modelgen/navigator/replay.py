@@ -221,7 +221,7 @@ def check_navigation_model(config: NavigatorConfig, model_file: Path) -> None:
     A model with a ``navigation:`` section is the navigator's to generate; a model without one flies only with
     the error states of the built-in navigator model, in its order (the hand-written error-state layout).
     """
-    from modelgen.fileio.datafiles import read_yaml, read_yaml_with_lines
+    from modelgen.fileio.datafiles import read_yaml
     from modelgen.model.loading import load_model
 
     data = read_yaml(model_file, "model file")

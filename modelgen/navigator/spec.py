@@ -52,6 +52,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType, SimpleNamespace
+from typing import Sequence
 
 import numpy as np
 import sympy as sp
@@ -60,6 +61,7 @@ from modelgen.codegen.mechanization import c_source, python_source
 from modelgen.derivation.mechanization_rates import mechanization_rates
 from modelgen.errors import ModelError
 from modelgen.model.ned_enu import NED_TO_ENU
+from modelgen.navigator.config import key_place
 
 #: axis word -> (NED axis, sign): the state is sign x the NED component; x, y, z: the e-frame axes (ecef)
 AXES = {"north": (0, 1.0), "east": (1, 1.0), "down": (2, 1.0), "up": (2, -1.0), "x": (0, 1.0), "y": (1, 1.0), "z": (2, 1.0)}
@@ -210,7 +212,7 @@ class NavigatorSpec:
         """Refuse a configuration that lacks what this model needs (scale-factor sigmas, free parameters)."""
         for kind in ("gyro_scale_factor", "accel_scale_factor"):
             if kind in self.blocks and getattr(config, f"{kind}_sigma", None) is None:
-                raise ModelError(f"{config.path}: model {self.name} has {kind.replace('_', ' ')} states: give "
+                raise ModelError(f"{key_place(config.path, f'initial.{kind}_sigma_ppm')}: model {self.name} has {kind.replace('_', ' ')} states: give "
                                  f"initial.{kind}_sigma_ppm")
         self.free_values(config)
 
@@ -220,15 +222,15 @@ class NavigatorSpec:
         given = dict(getattr(config, "parameters", None) or {})
         unknown = sorted(set(given) - set(self.parameter_names))
         if unknown:
-            raise ModelError(f"{config.path}: parameters: {', '.join(unknown)} is not a parameter of model {self.name} "
+            raise ModelError(f"{key_place(config.path, f'parameters.{unknown[0]}')}: parameters: {', '.join(unknown)} is not a parameter of model {self.name} "
                              f"(its parameters: {', '.join(self.parameter_names)})")
         owned = sorted(set(given) & set(self.parameter_expressions))
         if owned:
-            raise ModelError(f"{config.path}: parameters: {', '.join(owned)} is set by the navigator at every step "
+            raise ModelError(f"{key_place(config.path, f'parameters.{owned[0]}')}: parameters: {', '.join(owned)} is set by the navigator at every step "
                              "(operating point, noise, GNSS sigma or lever arm keys); it cannot be fixed here")
         missing = [p for p in self.free_parameters if p not in given and p not in self.defaults]
         if missing:
-            raise ModelError(f"{config.path}: model {self.name} needs parameters the navigator does not set: "
+            raise ModelError(f"{key_place(config.path, 'parameters')}: model {self.name} needs parameters the navigator does not set: "
                              f"{', '.join(missing)} (give them under parameters:, in the model's units)")
         return [float(given.get(p, self.defaults.get(p, 0.0))) for p in self.free_parameters]
 
@@ -338,7 +340,8 @@ class NavigatorSpec:
         for i in self.carried:
             a = -float(F[i, i])
             if not a > 0.0:
-                raise ModelError(f"{self.model_file}: state {names[i]!r} (an aiding sensor's own error) has no steady "
+                at = self.derived.model.states[i].place("dynamics") or self.model_file  # the line of its process
+                raise ModelError(f"{at}: state {names[i]!r} (an aiding sensor's own error) has no steady "
                                  f"state to start from (d/dt = {-a:g} x): declare it gauss_markov with a positive rate")
             P[i, i] = float(np.sum(np.square(G[i]) * q)) / (2.0 * a)
         return P
@@ -408,7 +411,8 @@ class NavigatorSpec:
                 math.sqrt(max(P[u, u], 0.0)) * abs(fu_), P[n, e] * fn_ * fe_, P[e, u] * fe_ * fu_, P[u, n] * fu_ * fn_)
 
 
-def _blocks(names: list[str], frame: str, where: str) -> dict[str, Block]:
+def _blocks(names: list[str], frame: str, where: str, places: Sequence[str] = ()) -> dict[str, Block]:
+    """The navigation and sensor error blocks by the states' names; ``places``: each state's file:line, if known."""
     words = FRAME_AXES[frame]
     found: dict[str, list[tuple[int, int, float]]] = {}
     forms: dict[str, str] = {}
@@ -423,7 +427,8 @@ def _blocks(names: list[str], frame: str, where: str) -> dict[str, Block]:
             if m:
                 word = m.group(1)
                 if kind in ("attitude", "velocity", "position") and word not in words:
-                    raise ModelError(f"{where}: state {name!r}: a model in the {frame} frame names its navigation "
+                    at = places[index] if index < len(places) and places[index] else where
+                    raise ModelError(f"{at}: state {name!r}: a model in the {frame} frame names its navigation "
                                      f"error axes {', '.join(words)}")
                 axis, sign = AXES[word] if kind in ("attitude", "velocity", "position") else ("xyz".index(word), 1.0)
                 found.setdefault(kind, []).append((index, axis, sign))
@@ -463,7 +468,7 @@ def _gnss_rows(derived, blocks: dict[str, Block], where: str) -> tuple[GnssRow, 
                 found = GnssRow(kind, hits[0][1], hits[0][2])
                 break
         if found is None:
-            raise ModelError(f"{where}: measurement {name!r} is neither a position nor a velocity difference "
+            raise ModelError(f"{model.measurements[r].place() or where}: measurement {name!r} is neither a position nor a velocity difference "
                              "along one axis: the navigator's GNSS update cannot fill it")
         rows.append(found)
     return tuple(rows)
@@ -486,7 +491,7 @@ def _carried(derived, blocks: dict[str, Block], where: str) -> tuple[int, ...]:
         coupled = [names[j] for j in range(len(names)) if j != i and (F[i, j] != 0 or F[j, i] != 0)]
         shared = [k for k in range(G.shape[1]) if G[i, k] != 0 and any(G[j, k] != 0 for j in range(len(names)) if j != i)]
         if coupled or shared or all(H[r, i] == 0 for r in range(H.shape[0])):
-            raise ModelError(f"{where}: the navigator cannot fly state {name!r}: it is neither a navigation or sensor "
+            raise ModelError(f"{derived.model.states[i].place() or where}: the navigator cannot fly state {name!r}: it is neither a navigation or sensor "
                              "error block state nor an aiding sensor's own error (a measurement's bias: that enters "
                              "the GNSS rows and is coupled to no other state"
                              + (f"; it is coupled to {', '.join(coupled)}" if coupled else "") + ")")
@@ -514,7 +519,7 @@ def spec_of(derived, model_file: Path, with_python: bool = True) -> NavigatorSpe
                          f"declares {model.frame or 'no frame'})")
     _check_forms(model_file)
     names = list(model.state_names)
-    blocks = _blocks(names, frame, where)
+    blocks = _blocks(names, frame, where, [s.place() for s in model.states])
     rows = _gnss_rows(derived, blocks, where)
     parameter_names = tuple(model.parameter_names)
     defaults = {k: float(v) for k, v in model.parameter_defaults().items()}

@@ -355,3 +355,34 @@ def test_a_folder_named_like_a_built_in_model_does_not_shadow_it(tmp_path, monke
     monkeypatch.chdir(tmp_path)
     (tmp_path / "ned_doppler18").mkdir()
     assert len(load_model("ned_doppler18").states) == 18
+
+
+def test_loaded_items_carry_the_lines_of_their_entries_and_fields():
+    """Each state, noise, parameter and measurement keeps file:line of its entry and of its psd / variance /
+    expression / value / equation, so that a refusal made after loading can name it (block style: each field on a
+    line of its own); equality and the model hash ignore them."""
+    from modelgen.codegen.description import model_hash
+
+    text = edit('  - {name: position_difference, expression: dx, variance: "0.01"}\n',
+                '  - name: position_difference\n    expression: dx\n    variance: "0.01"\n')
+    m = load_model_text(text, "model.yaml")
+    assert m.parameters[0].place() == m.parameters[0].place("value") == f"model.yaml:{LINE['rate']}"
+    assert m.states[1].place() == f"model.yaml:{LINE['velocity_error']}"
+    assert m.states[1].place("dynamics") == f"model.yaml:{LINE['dv']}"
+    assert m.noises[0].place("psd") == f"model.yaml:{LINE['noise']}"
+    measurement = m.measurements[0]
+    assert (measurement.place(), measurement.place("expression"), measurement.place("variance")) == (
+        f"model.yaml:{LINE['meas']}", f"model.yaml:{LINE['meas'] + 1}", f"model.yaml:{LINE['meas'] + 2}")
+    elsewhere = load_model_text(text, "other/place.yaml")
+    assert elsewhere.measurements == m.measurements and model_hash(elsewhere) == model_hash(m)
+
+
+def test_items_of_vector_navigation_and_transformed_models_carry_their_lines(tmp_path):
+    """The vector loader's and the navigation derivation's line maps reach the items too; a transform keeps the
+    lines of the items it takes from its base (they are in the base file)."""
+    nav = load_model("gps_pseudorange11_twin")
+    assert re.fullmatch(r".*gps_pseudorange11_twin\.yaml:\d+", nav.measurements[3].place("variance"))
+    (tmp_path / "base.yaml").write_text(BASE)
+    write_transform(tmp_path / "small.yaml", "small", "base.yaml")
+    small = load_model(tmp_path / "small.yaml")
+    assert small.noises[0].place("psd") == f"{tmp_path / 'base.yaml'}:{LINE['noise']}"

@@ -215,3 +215,17 @@ def test_written_navigation_equations_give_the_named_mechanizations_error_model(
     changed = WRITTEN + EQUATIONS.replace(" - cross(2*omega_ie_n + omega_en_n, v_n)", "")
     no_coriolis = derive(load_model_text(changed, "changed.yaml")).numeric(values)
     assert np.abs(no_coriolis["F"] - named["F"]).max() > 1e-5
+
+
+def test_a_pseudorange_s_displacement_at_the_computed_position_is_listed_among_the_approximations_declared_or_not():
+    """d = M (computed) (p - p_c) in a pseudo-range (rate) is an approximation (exact to first order: it drops no
+    term): the twin declares it and its notes list it; a file that does not declare it has it listed anyway, naming
+    the measurement that makes it.  Before, neither listed it."""
+    from modelgen.model.loading import load_model_text
+
+    twin = [n for n in load_model("gps_pseudorange11_twin").notes if n.startswith("Approximation pseudorange_at_computed_position (")]
+    assert len(twin) == 1 and "M (computed)" in twin[0] and "dropped no term in this model" in twin[0]
+    assert "declared or not" not in twin[0]
+    notes = load_model_text(RANGE_RATE, "range_rate.yaml").notes
+    implied = [n for n in notes if n.startswith("Approximation pseudorange_at_computed_position (")]
+    assert len(implied) == 1 and "made by navigation.measurements[0] (of: pseudorange_rate), declared or not" in implied[0]

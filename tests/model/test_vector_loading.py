@@ -223,3 +223,13 @@ def test_enu_vectors_are_stored_east_north_up_and_equal_the_ned_model_permuted()
     assert enu.state_names == ["dv_e", "dv_n", "dv_u"] and ned.state_names == ["dv_n", "dv_e", "dv_d"]
     F_enu, F_ned = derive(enu).numeric({"L": 0.8})["F"], derive(ned).numeric({"L": 0.8})["F"]
     assert F_enu == pytest.approx(NED_TO_ENU @ F_ned @ NED_TO_ENU.T, abs=1e-20)
+
+
+def test_every_component_of_a_vector_entry_carries_the_entry_s_line(model):
+    """A vector's components are items of their own: each keeps the line of the entry that declared the vector
+    (noise w_g, its psd list on that line too), for refusals made after loading."""
+    lines = VECTOR_MODEL.splitlines()
+    noise = next(i for i, text in enumerate(lines, start=1) if "name: w_g" in text)
+    assert {w.place("psd") for w in model.noises if w.name.startswith("w_g")} == {f"vec_demo.yaml:{noise}"}
+    measurement = next(i for i, text in enumerate(lines, start=1) if "name: z_v" in text)
+    assert {m.place("variance") for m in model.measurements} == {f"vec_demo.yaml:{measurement}"}

@@ -141,3 +141,30 @@ def test_the_c_navigator_also_skips_the_hidden_heading_epoch():
     flight, _ = fly_c(hidden, inputs, navigator)
     assert flight.alignment["time"] == python.time > free.time
     assert abs(flight.alignment["heading"] - python.heading) <= 1e-12
+
+
+@pytest.mark.parametrize("window_s", [70.0, 1.0e4])
+def test_a_still_window_longer_than_the_log_is_one_refusal_naming_its_configuration_line(tmp_path, window_s):
+    """alignment.still_window_s longer than the whole IMU log (61 s): one 'modelgen: error:' line naming the
+    configuration file and the key's line, exit 2, for either navigator, before any navigator is built.  Before:
+    the alignment's diagnosis, naming the GNSS file and no configuration line (70 s: 7000 samples, inside the
+    C's 8192-sample ring, so its bound passed it too)."""
+    import yaml
+
+    from cli_in_process import run_modelgen
+
+    data = yaml.safe_load((DATA / "excerpt.yaml").read_text())
+    for section in ("imu", "gnss"):
+        data[section]["file"] = str(DATA / data[section]["file"])
+    data["alignment"]["still_window_s"] = window_s
+    path = tmp_path / "nav.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    line = next(i for i, text in enumerate(path.read_text().splitlines(), start=1) if "still_window_s:" in text)
+    for navigator in ("c", "python"):
+        result = run_modelgen(["replay", path, "--out", tmp_path / navigator, "--no-figures", "--navigator", navigator],
+                              tmp_path, timeout=300)
+        errors = [x for x in result.stderr.splitlines() if x.startswith("modelgen: error:")]
+        assert result.returncode == 2 and len(errors) == 1, result.stderr
+        assert errors[0].startswith(f"modelgen: error: {path}:{line}: alignment.still_window_s: "), errors[0]
+        assert "more than the whole IMU log has" in errors[0] and "Traceback" not in result.stderr
+        assert not (tmp_path / navigator).exists()

@@ -169,14 +169,16 @@ def _model_with_bias(tmp_path: Path, bias: str) -> Path:
     return path
 
 
-def test_an_error_state_without_a_steady_state_is_refused_naming_the_model_file(tmp_path):
+def test_an_error_state_without_a_steady_state_is_refused_naming_the_model_file_and_line(tmp_path):
+    """The refusal names the line of the entry that declared the state's process (before: the file alone)."""
     from modelgen.navigator.spec import navigator_spec
 
     path = _model_with_bias(tmp_path, "      bias: {process: random_constant, symbols: [e_rn, e_re, e_rd], "
                                       "names: [gnss_error_north, gnss_error_east, gnss_error_down]}")
     spec = navigator_spec(path)
     assert len(spec.carried) == 3
-    with pytest.raises(ModelError, match=r"gnss_bias_nav\.yaml: state 'gnss_error_north'.*no steady state"):
+    line = next(i for i, text in enumerate(path.read_text().splitlines(), start=1) if "bias: {process: random_constant" in text)
+    with pytest.raises(ModelError, match=rf"gnss_bias_nav\.yaml:{line}: state 'gnss_error_north'.*no steady state"):
         spec.carried_covariance(np.eye(24), _parameters(spec, 2.0, 0.05))
 
 
@@ -228,7 +230,8 @@ def test_the_smoother_carries_the_error_states_alike_from_the_c_and_the_python_f
 
 def test_a_state_the_navigator_can_neither_feed_back_nor_carry_is_refused_naming_it(tmp_path):
     """A second gyro bias (summed Gauss-Markov drift) enters the attitude rates: it is not an aiding sensor's own
-    error, and the navigator has no feedback for it, so it is refused instead of flown with P0 = 0 and reset."""
+    error, and the navigator has no feedback for it, so it is refused instead of flown with P0 = 0 and reset; the
+    refusal names the line of the entry that declares it."""
     from modelgen.navigator.spec import navigator_spec
 
     text = (MODELS / "ins_gnss21_rw_nav.yaml").read_text()
@@ -239,6 +242,7 @@ def test_a_state_the_navigator_can_neither_feed_back_nor_carry_is_refused_naming
         '    - {of: gyro_bias, process: gauss_markov, rate: "1/300", sigma: "1e-4", symbols: [m_gx, m_gy, m_gz], '
         'names: [gyro_markov_x, gyro_markov_y, gyro_markov_z], noise_symbols: [w_mx, w_my, w_mz], '
         'noise_names: [gyro_markov_noise_x, gyro_markov_noise_y, gyro_markov_noise_z]}\n')))
-    with pytest.raises(ModelError, match=r"summed_drift_nav\.yaml: the navigator cannot fly state 'gyro_markov_x'.*"
+    at = next(i for i, text in enumerate(path.read_text().splitlines(), start=1) if "gyro_markov_x" in text)
+    with pytest.raises(ModelError, match=rf"summed_drift_nav\.yaml:{at}: the navigator cannot fly state 'gyro_markov_x'.*"
                                          r"coupled to attitude_error_north"):
         navigator_spec(path, with_python=False)

@@ -153,6 +153,18 @@ def test_parameters_the_model_lacks_or_the_navigator_sets_are_refused(spec21):
     assert spec21.free_values(config) == [7.3e-5]  # a free parameter (here one with a default) is the config's
 
 
+def test_configuration_parameters_refused_by_the_model_name_their_configuration_line(tmp_path, spec21):
+    """The spec's refusals of a configuration's parameters: name FILE:LINE of the key (before: the file alone)."""
+    from types import SimpleNamespace
+
+    path = tmp_path / "replay.yaml"
+    path.write_text("navigator: x\nparameters:\n  latitude: 0.7\n  no_such_parameter: 1.0\n")
+    with pytest.raises(ModelError, match=rf"^{re.escape(str(path))}:4: parameters: no_such_parameter is not a parameter"):
+        spec21.free_values(SimpleNamespace(path=str(path), parameters={"no_such_parameter": 1.0}))
+    with pytest.raises(ModelError, match=rf"^{re.escape(str(path))}:3: parameters: latitude is set by the navigator"):
+        spec21.free_values(SimpleNamespace(path=str(path), parameters={"latitude": 0.7}))
+
+
 def test_a_scale_factor_model_without_its_sigmas_is_refused(spec21):
     from dataclasses import replace
 

@@ -92,6 +92,7 @@ LOCAL_LEVEL_APPROXIMATIONS = frozenset({
     "constant_radii", "single_earth_radius", "no_height_in_radii", "gravity_height_only", "free_air_gradient",
     "free_vertical_channel", "level_flight", "no_vertical_channel", "damped_vertical_channel",
     "no_earth_rate_position_terms", "no_transport_rate_position_terms", "constant_gravity",
+    "pseudorange_at_computed_position",  # ecef: the position is in metres already (M = I), the displacement exact
 })
 #: Approximations each mechanization accepts (None: all of the engine's).
 MECHANIZATION_APPROXIMATIONS: dict[str, frozenset[str] | None] = {

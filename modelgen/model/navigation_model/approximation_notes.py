@@ -20,15 +20,20 @@ from modelgen.model.perturbation.approximations import APPROXIMATION_DESCRIPTION
 from modelgen.model.perturbation.problem import ErrorEquations, NeglectedTerm
 
 
-def approximation_notes(data: Mapping, equations: ErrorEquations, decl: Declarations) -> list[str]:
-    """One note per declared approximation: what it is and each term it dropped, with its size at the check scenario."""
+def approximation_notes(data: Mapping, equations: ErrorEquations, decl: Declarations,
+                        implied: Mapping[str, str] | None = None) -> list[str]:
+    """One note per approximation: what it is and each term it dropped, with its size at the check scenario.
+
+    The declared ones in their order, then those ``implied`` (name -> the key of the entry that makes it whether
+    declared or not, such as a pseudo-range's) that the file does not declare, so that none goes unlisted."""
     values = _check_values(data, decl)
     names = {"F": ([s.name for s in decl.states], [s.name for s in decl.states]),
              "G": ([s.name for s in decl.states], [n.name for n in decl.noises])}
     approximations = [approximation_name(a) for a in data["navigation"].get("approximations") or []]
     scopes = {approximation_name(a): a["in"] for a in data["navigation"].get("approximations") or [] if isinstance(a, dict)}
+    made_by = {name: key for name, key in (implied or {}).items() if name not in approximations}
     notes = []
-    for name in approximations:
+    for name in [*approximations, *made_by]:
         terms = [(t, shown) for t, shown in zip(equations.neglected, equations.readable) if t.approximation == name]
         parts = []
         for t, text in terms:
@@ -41,8 +46,9 @@ def approximation_notes(data: Mapping, equations: ErrorEquations, decl: Declarat
         dropped = "; ".join(parts) if parts else "no term in this model"
         within = scopes.get(name)
         scope = f", in the {', '.join(within) if isinstance(within, list) else within} rows only" if within else ""
+        scope += f"; made by {made_by[name]}, declared or not" if name in made_by else ""
         notes.append(f"Approximation {name} ({APPROXIMATION_DESCRIPTIONS[name]}{scope}): dropped {dropped} (term, and its size at the check scenario).")
-    if approximations and not values:
+    if (approximations or made_by) and not values:
         notes.append("The sizes above need a check: scenario; this model has none.")
     return notes
 

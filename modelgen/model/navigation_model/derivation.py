@@ -26,6 +26,7 @@ from modelgen.model.navigation_model.approximation_notes import approximation_no
 from modelgen.model.navigation_model.error_states import read_error_definition
 from modelgen.model.navigation_model.expressions import read_written_equations
 from modelgen.model.navigation_model.measurements import read_measurements
+from modelgen.model.navigation_model import pseudoranges
 from modelgen.model.navigation_model.navigation_state import read_navigation_state, read_user_parameters
 from modelgen.model.navigation_model.section import (
     NAVIGATION_TOP_KEYS,
@@ -194,7 +195,7 @@ def _error_model(data, lines, filename, decl: Declarations, own: list[str], equa
         title=free_text(data, "title", dict(lines), filename),
         source=free_text(data, "source", dict(lines), filename),
         frame=free_text(data, "frame", dict(lines), filename),
-        notes=[*notes_text(dict(data), dict(lines), filename), *approximation_notes(data, equations, decl)],
+        notes=[*notes_text(dict(data), dict(lines), filename), *approximation_notes(data, equations, decl, implied_approximations(data))],
         locations=locations,
     )
     undeclared = [str(p.get("name")) for p in (data.get("parameters") or []) if isinstance(p, dict) and "unit" not in p]
@@ -202,6 +203,18 @@ def _error_model(data, lines, filename, decl: Declarations, own: list[str], equa
                    if any(q.name == name for q in parameters)]  # a vector parameter's components
     check_model_units(model, locations, undeclared)
     return model
+
+
+def implied_approximations(data: Mapping) -> dict[str, str]:
+    """The approximations the file's measurements make whether it declares them or not, each with the key of the
+    first entry that makes it: a local-level pseudo-range's M (computed) (:data:`.pseudoranges.APPROXIMATION`)."""
+    section = data["navigation"]
+    if str(section.get("mechanization", "local_level")) != "local_level":
+        return {}
+    for i, entry in enumerate(section.get("measurements") or []):
+        if isinstance(entry, Mapping) and entry.get("of") in pseudoranges.KINDS:
+            return {pseudoranges.APPROXIMATION: f"navigation.measurements[{i}] (of: {entry['of']})"}
+    return {}
 
 
 def _locations(lines: Mapping[str, str], filename: str, decl: Declarations, parameters: Sequence[Parameter], measurements: Sequence[Measurement]) -> dict[str, str]:

@@ -22,6 +22,13 @@ from modelgen.model.navigation_model.section import (
 )
 from modelgen.model.perturbation.problem import Mechanization, NavigationState
 
+#: The approximation every local-level pseudo-range (rate) makes, declared or not: the displacement d from the
+#: computed receiver is M (computed) times the position difference (``mech.metres(computed.position)`` below), so a
+#: model with such a measurement lists it among its approximations (modelgen.model.navigation_model.approximation_notes).
+APPROXIMATION = "pseudorange_at_computed_position"
+#: The measurement kinds that make it.
+KINDS = ("pseudorange", "pseudorange_rate")
+
 
 def pseudorange_measurement(read: SectionReader, entry: Mapping, key: str, frame: str, clock: sp.Matrix | None, decl: Declarations) -> MeasurementParts:
     """Pseudo-ranges to satellites along unit line-of-sight vectors e_k (navigation axes, receiver to satellite).
@@ -30,6 +37,7 @@ def pseudorange_measurement(read: SectionReader, entry: Mapping, key: str, frame
     computed receiver to satellite k at distance rho is
     |rho e_k - d| = sqrt(rho^2 - 2 rho e_k . d + d . d) (|e_k| = 1), exact and
     nonlinear in d; the measured pseudo-range adds the receiver clock bias.
+    d is M (computed) times the position difference (:data:`APPROXIMATION`).
     """
     sights = _lines_of_sight(read, entry, key, frame, clock, decl)
     distance = sp.Symbol("satellite_distance", positive=True)

@@ -139,10 +139,12 @@ APPROXIMATIONS: dict[str, Callable[[Stage, NavigationProblem], Stage]] = {
     "no_transport_rate_position_terms": _applied_while_perturbing,
     "no_gravity_gradient": _applied_while_perturbing,
     "lever_arm_at_computed_position": _applied_while_perturbing,
+    "pseudorange_at_computed_position": _applied_while_perturbing,
 }
 #: Approximations that change the perturbed equations rather than the result.
 EQUATION_APPROXIMATIONS = frozenset(
-    {"no_earth_rate_position_terms", "no_transport_rate_position_terms", "no_gravity_gradient", "lever_arm_at_computed_position"}
+    {"no_earth_rate_position_terms", "no_transport_rate_position_terms", "no_gravity_gradient", "lever_arm_at_computed_position",
+     "pseudorange_at_computed_position"}
 )
 
 APPROXIMATION_DESCRIPTIONS: dict[str, str] = {
@@ -152,6 +154,11 @@ APPROXIMATION_DESCRIPTIONS: dict[str, str] = {
     "lever_arm_at_computed_position": (
         "a position measurement's lever arm is turned from metres into (dL, dlambda, dh) at the computed position"
         " (no O(l/R) d(1/(R + h))/dh, dR/dL or tan L terms from it)"
+    ),
+    "pseudorange_at_computed_position": (
+        "a pseudo-range's (and pseudo-range rate's) displacement from the computed receiver is M (computed) times the"
+        " position difference, M the metres per (dL, dlambda, dh) at the computed position, not the exact displacement"
+        " over the curved Earth (exact to first order: no term of H is dropped; the range itself is off at second order)"
     ),
     **{name: (function.__doc__ or "").strip().split("\n")[0] for name, function in APPROXIMATIONS.items() if function is not _applied_while_perturbing},
 }
