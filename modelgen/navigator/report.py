@@ -228,6 +228,21 @@ def _table_cell(text: str) -> str:
     return " ".join(text.split()).replace("|", "\\|")
 
 
+def _how_chosen(config: NavigatorConfig) -> str:
+    """How this configuration's numbers were chosen, as far as the configuration itself says (its ``tuning:``).
+
+    The built-in drive's stages are its own history (bench/navigator_tuning.py); a user's configuration
+    went through none of them unless its ``tuning:`` says so, so the summary repeats only that record.
+    """
+    if not config.tuning:
+        return ("How the values were chosen: the configuration states no tuning (no `tuning:` section), so every "
+                "number above and below is as the configuration writes it (a noise = data sheet x its factor).")
+    return ("How the values were chosen: as the configuration's `tuning:` section states, key by key, below; a number "
+            "it does not list is as the configuration writes it. The tuning tool (bench/navigator_tuning.py in "
+            "the repository; docs/replay-configuration.md) chooses them from the innovations of flights with "
+            "GNSS everywhere, never from outage errors.")
+
+
 def _tuning_lines(config: NavigatorConfig) -> list[str]:
     """The configuration's own statement of which numbers were tuned and how (its ``tuning:`` section)."""
     if not config.tuning:
@@ -245,7 +260,8 @@ def _alignment_lines(summary: dict) -> list[str]:
     return ["## Alignment", "",
             f"By the {'Python' if summary.get('navigator') == 'python' else 'C'} navigator itself, from its IMU and GNSS calls: roll "
             f"{a['roll_deg']:.4f} deg and pitch {a['pitch_deg']:.4f} deg from the mean specific force of the "
-            f"{a['rest_samples']} IMU samples of the rest window ending at the last GNSS epoch at rest "
+            f"{a['rest_samples']} IMU samples that the IMU's still detector accepted in the rest window ending at the "
+            "last GNSS epoch at rest "
             f"({a['rest_end_s']} s), which also give the gyro bias and the accelerometer bias along gravity; heading "
             f"{a['heading_deg']:.3f} deg from the GNSS course at {summary['alignment_time_s']} s, the first used epoch "
             "faster than the heading speed.", ""]
@@ -467,16 +483,7 @@ def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, 
     for kind, entry in config.noise.items():
         lines.append(f"| {kind} | {entry.value:g} {entry.unit} | {entry.factor:g} | {entry.si:.4g} | {entry.why} |")
     lines += ["",
-              "How the values were chosen (`python bench/navigator_tuning.py`; every stage flies the drive with GNSS "
-              "everywhere, no outage is flown and no outage error is looked at): (1) one common factor on the two "
-              "white noises, the one whose median NIS of the 6-row GNSS update (no gate) is closest to the "
-              "chi-square median for 6 degrees of freedom, 5.35; (2) the NHC sigma, by the NHC update's own median "
-              "NIS against 1.39 (2 degrees of freedom); (3) the NHC's angular-rate limit and the gate probability, by "
-              "the median GNSS NIS, the RMS against the receiver and the number of de-weighted epochs; (4, "
-              "`--correlation`) the time correlation of each aiding update's innovations (GNSS position, GNSS "
-              "velocity, NHC, ZUPT): the integrated autocorrelation f of the standardized innovations of a flight "
-              "with GNSS everywhere, R x f (a variance factor x f, a sigma x sqrt(f)). The bias "
-              "driving noises are the data sheet's, not tuned. The configuration file records each stage's numbers.", "",
+              _how_chosen(config), "",
               *_tuning_lines(config),
               f"GNSS NIS in this flight (outside outages): mean {_fmt(summary['gnss_nis_mean'])}, median "
               f"{_fmt(summary['gnss_nis_median'])}; gate {_fmt(summary['gnss_nis_gate'])} (chi-square, 6 degrees of "
