@@ -63,7 +63,7 @@ extern "C" {
 
 /* The model this filter was generated from: sha256 of its canonical declaration
    (first 16 hex digits), and the generator's version. */
-#define GPS_PSEUDORANGE11_TWIN_MODEL_HASH "1dc6d06db77e5545"
+#define GPS_PSEUDORANGE11_TWIN_MODEL_HASH "4caf935096271fcf"
 #define GPS_PSEUDORANGE11_TWIN_MODELGEN_VERSION "0.1.0"
 
 /* State indices: x[GPS_PSEUDORANGE11_TWIN_STATE_<NAME>], P[i * GPS_PSEUDORANGE11_TWIN_N_STATES + j]

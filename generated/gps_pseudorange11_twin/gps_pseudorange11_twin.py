@@ -85,7 +85,7 @@ NOISE_NAMES = ("gyro_white_noise_east", "gyro_white_noise_north", "gyro_white_no
 MEASUREMENT_NAMES = ("pseudorange_difference_1", "pseudorange_difference_2", "pseudorange_difference_3", "pseudorange_difference_4")
 PARAMETER_NAMES = ("gyro_angle_random_walk", "accel_velocity_random_walk", "gravity", "clock_bias_psd", "clock_drift_psd", "pseudorange_sigma_1", "pseudorange_sigma_2", "pseudorange_sigma_3", "pseudorange_sigma_4", "velocity_east", "velocity_north", "latitude", "specific_force_east", "specific_force_north", "specific_force_up", "earth_rate", "earth_radius", "line_of_sight_east_1", "line_of_sight_north_1", "line_of_sight_up_1", "line_of_sight_east_2", "line_of_sight_north_2", "line_of_sight_up_2", "line_of_sight_east_3", "line_of_sight_north_3", "line_of_sight_up_3", "line_of_sight_east_4", "line_of_sight_north_4", "line_of_sight_up_4")
 PARAMETER_DEFAULTS = {"gravity": 9.80665, "earth_rate": 7.2921151467e-05, "earth_radius": 6378137.0}
-MODEL_HASH = "1dc6d06db77e5545"  # sha256 of the canonical model declaration, first 16 hex digits
+MODEL_HASH = "4caf935096271fcf"  # sha256 of the canonical model declaration, first 16 hex digits
 MODELGEN_VERSION = "0.1.0"
 
 # State, noise and measurement indices, named as the C's <MODEL>_STATE_<NAME> ... macros.
