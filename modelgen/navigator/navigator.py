@@ -109,6 +109,7 @@ def prepare(config: NavigatorConfig, imu: ImuLog, gnss: GnssLog) -> Inputs:
     from modelgen.navigator.alignment import check_still_window
 
     check_still_window(config, time)  # a window longer than the log, refused before any navigator is built
+    check_zupt_window(config, time)
     return Inputs(time, imu.specific_force @ to_imu, imu.angular_rate @ to_imu, kept, notes, float(gnss.time[0]), gnss,
                   aiding)
 
@@ -122,6 +123,24 @@ def read_aiding_logs(config: NavigatorConfig) -> dict[str, ScalarLog]:
             log.time = log.time + settings.time_offset
             out[section] = log
     return out
+
+
+def check_zupt_window(config: NavigatorConfig, time: np.ndarray) -> None:
+    """Refuse an enabled ZUPT whose detector window is longer than the whole IMU log, naming zupt.window_s's line.
+
+    The detector could never call a sample still, so the configuration would fly with no ZUPT at all and say
+    nothing: refused as what the configuration asks, as the still detector's window is (check_still_window)."""
+    if not config.zupt_enabled:
+        return
+    size = max(WINDOW_SAMPLES_MIN, int(round(config.zupt_window / float(np.median(np.diff(time))))))
+    if size > len(time):
+        from modelgen.navigator.config import key_place
+
+        key = "zupt.window_s"
+        raise ModelError(f"{key_place(config.path, key)}: {key}: the zero-velocity detector's window of "
+                         f"{config.zupt_window:g} s is {size} IMU samples, more than the whole IMU log has ({len(time)} "
+                         f"samples, {float(time[-1] - time[0]):.3g} s): it could never call the IMU still, so no ZUPT "
+                         "would be made; give a window shorter than the log, or zupt.enabled: false")
 
 
 def stationary_mask(time: np.ndarray, force: np.ndarray, rate: np.ndarray, gyro_bias: np.ndarray,
