@@ -87,6 +87,13 @@ The method and the decision, written before any outage was flown with its result
    whiteness.  The outage schedules are flown (``modelgen replay``) only after the numbers are written, and
    the numbers are not changed after.
 
+4. second start (``--both-starts``; added after the first start's fixed point was shipped and its outages
+   flown, before this rule's choice was flown): the same iteration from the white start (the stage-4 keys at
+   their white values, the configuration's white-noise factor).  The fixed point is not unique: from there the
+   15-state iteration settles at R_pos x 41 and NHC sigmas of 0.04 m/s instead of R_pos x 20.5 and 0.07/0.17.
+   Of the converged fixed points, the one with the higher innovations log-likelihood (GNSS present, every
+   sensor) is shipped -- a choice the innovations make, not the outages.
+
 The Python navigator flies these flights: it is the one that records every update's innovation and its
 covariance (the generated C navigator does not hand them out).  Each flight's statistics are kept, so the
 stage-4 measurement of an iteration is the last stage-5 flight of the one before, at no extra flight.
@@ -101,7 +108,7 @@ modelgen/data/replay_drive_0708.yaml by hand (with this script named there).
     python bench/navigator_tuning.py --likelihood [CONFIG] [--json FILE]    # stage 5 (about half an hour)
     python bench/navigator_tuning.py --markov [CONFIG] [--json FILE]        # stage 6 (about half an hour)
     python bench/navigator_tuning.py --markov-check [STAGE6_JSON] [--json FILE]   # stage 6b (a few minutes)
-    python bench/navigator_tuning.py --fixed-point [CONFIG] [--json FILE]   # stage 7 (both: about a quarter of an hour)
+    python bench/navigator_tuning.py --fixed-point [CONFIG] [--both-starts] [--json FILE]   # stage 7 (both: about a quarter of an hour)
 """
 
 from __future__ import annotations
@@ -464,8 +471,12 @@ def markov_check(arguments: list[str]) -> None:
         print(f"written {out_json}")
 
 
-def _fixed_point_one(config_file: str) -> dict:
-    """Stage 7 on one configuration (module docstring): the iterates, the fixed point and its statistics."""
+def _fixed_point_one(config_file: str, start: str = "shipped") -> dict:
+    """Stage 7 on one configuration (module docstring): the iterates, the fixed point and its statistics.
+
+    ``start``: "shipped" (the configuration's numbers) or "white" (the stage-4 keys at their white values, the
+    white-noise factor the configuration's).
+    """
     import time
 
     from scipy.optimize import minimize_scalar
@@ -511,8 +522,9 @@ def _fixed_point_one(config_file: str) -> dict:
     def relative(a: dict, b: dict) -> dict[str, float]:
         return {key: abs(a[key] / b[key] - 1.0) for key in a}
 
-    current = shipped
-    iterates = [{"iteration": 0, "values": values_of(shipped), "note": "the shipped configuration"}]
+    current = shipped if start == "shipped" else white
+    iterates = [{"iteration": 0, "values": values_of(current),
+                 "note": "the shipped configuration" if start == "shipped" else "the stage-4 keys at their white values"}]
     converged = False
     say(f"stage 7: {spec.name}, GNSS present everywhere, no outage flown; start {iterates[0]['values']}")
     for iteration in range(1, FIXED_POINT_ITERATIONS + 1):
@@ -551,7 +563,7 @@ def _fixed_point_one(config_file: str) -> dict:
     at = fly(current)  # the last stage-5 flight: the fixed point's statistics
     residual = tuning.tune(white, at["rows"], spec)
     say(f"{'converged' if converged else 'NOT converged'} after {len(iterates) - 1} iterations, {len(flights)} flights")
-    return {"configuration": name, "model": spec.name, "tolerance": FIXED_POINT_TOLERANCE,
+    return {"configuration": name, "model": spec.name, "start": start, "tolerance": FIXED_POINT_TOLERANCE,
             "max_iterations": FIXED_POINT_ITERATIONS, "white_values": dict(STAGE4_FROM), "converged": converged,
             "iterations": len(iterates) - 1, "flights": len(flights), "iterates": iterates,
             "fixed_point": values_of(current),
@@ -572,12 +584,16 @@ def fixed_point(arguments: list[str]) -> None:
     from modelgen.fileio.datafiles import package_path
 
     out_json, arguments = _json_option(arguments)
+    starts = ("shipped", "white") if "--both-starts" in arguments else ("shipped",)
+    arguments = [a for a in arguments if a != "--both-starts"]
     files = arguments or [str(package_path("data", "replay_drive_0708.yaml")),
                           str(package_path("data", "replay_drive_0708_21.yaml"))]
-    with ProcessPoolExecutor(min(2, len(files))) as pool:
-        results = list(pool.map(_fixed_point_one, files))
+    jobs = [(f, s) for f in files for s in starts]
+    with ProcessPoolExecutor(min(2, len(jobs))) as pool:
+        results = list(pool.map(_fixed_point_one, *zip(*jobs)))
     for r in results:
-        print(f"stage 7: {r['configuration']} ({r['model']}): {'converged' if r['converged'] else 'NOT converged'} "
+        print(f"stage 7 from the {r['start']} start: {r['configuration']} ({r['model']}): "
+              f"{'converged' if r['converged'] else 'NOT converged'} "
               f"in {r['iterations']} iterations (tolerance {100 * r['tolerance']:g} %, cap {r['max_iterations']}), "
               f"{r['flights']} flights")
         for it in r["iterates"]:
@@ -595,10 +611,17 @@ def fixed_point(arguments: list[str]) -> None:
         print("  whiteness at the fixed point (stage 4's statistics):")
         for st in r["rows"]:
             print(f"    {st['source']:5} {st['label']:15} tau {st['tau_s']:6.2f} s  f {st['factor']:6.2f}")
+    for f in files:  # step 4 of the method: of the fixed points found, the higher log L ships
+        found = [r for r in results if r["configuration"] == Path(f).name and r["converged"]]
+        if len(found) > 1:
+            best = max(found, key=lambda r: r["log_likelihood"]["total"])
+            print(f"decision for {Path(f).name}: ship the fixed point from the {best['start']} start (log L " +
+                  ", ".join(f"{r['start']} {r['log_likelihood']['total']:.1f}" for r in found) + ")")
     if out_json:
-        for r in results:  # one file per configuration: FILE, or FILE_<states>.json for several
+        for r in results:  # one file per run: FILE, or FILE_<states>[_white].json for several
+            suffix = f"_{r['states']}" + ("_white" if r["start"] == "white" else "")
             path = Path(out_json) if len(results) == 1 else Path(out_json).with_name(
-                f"{Path(out_json).stem}_{r['states']}.json")
+                f"{Path(out_json).stem}{suffix}.json")
             path.write_text(json.dumps(r, indent=2, default=float) + "\n")
             print(f"written {path}")
 
