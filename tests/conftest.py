@@ -9,6 +9,7 @@ tests of :data:`SOLO_TESTS`, handed out on their own; tests marked
 ``xdist_group(name)`` all run on one worker, one after another.
 """
 
+import functools
 import os
 import sys
 from pathlib import Path
@@ -134,28 +135,65 @@ def private_compile_cache(tmp_path_factory):
             os.environ[name] = value
 
 
-@pytest.fixture(scope="session")
-def paper_model():
+@functools.lru_cache(maxsize=None)
+def _loaded_builtin(name: str):
+    """A built-in model by name, loaded once in this process (the suite's share of :func:`load_model`)."""
     from modelgen.model.loading import load_model
 
-    return load_model("ned_doppler18")
+    return load_model(name)
+
+
+@functools.lru_cache(maxsize=None)
+def _derived_builtin(name: str):
+    """A built-in model by name, derived once in this process from :func:`_loaded_builtin`'s model."""
+    from modelgen.derivation.symbolic import derive
+
+    return derive(_loaded_builtin(name))
+
+
+@functools.lru_cache(maxsize=1)
+def _mechanization_models():
+    """modelgen.checks.mechanizations' (ecef, local-level twin, wander azimuth), derived once in this process."""
+    from modelgen.checks.mechanizations import derive_mechanization_models
+
+    return derive_mechanization_models()
+
+
+@pytest.fixture(scope="session")
+def loaded_builtin():
+    """A built-in model by name, loaded once per session (a navigation-equation twin takes seconds).
+
+    Models are frozen (ErrorModel, DerivedModel): every test of a worker that
+    asks for a built-in model gets the same object, loaded by the same
+    :func:`modelgen.model.loading.load_model` a test calling it would run.
+    """
+    return _loaded_builtin
 
 
 @pytest.fixture(scope="session")
 def derived_builtin():
-    """A built-in model by name, loaded and derived once per session (a navigation-equation twin takes seconds)."""
-    from functools import lru_cache
-
-    from modelgen.jobs import load_and_derive
-
-    return lru_cache(maxsize=None)(load_and_derive)
+    """A built-in model by name, loaded and derived once per session (``load_and_derive``: derive(load_model(name)))."""
+    return _derived_builtin
 
 
 @pytest.fixture(scope="session")
-def paper_derived(paper_model):
-    from modelgen.derivation.symbolic import derive
+def mechanization_models():
+    """The mechanization cross-checks' three models (ecef, local level, wander azimuth), derived once per session.
 
-    return derive(paper_model)
+    Shared by tests/model/test_ecef_mechanization.py, test_wander_azimuth_mechanization.py and
+    tests/checks/test_mechanizations.py (the wander model alone takes seconds to load).
+    """
+    return _mechanization_models()
+
+
+@pytest.fixture(scope="session")
+def paper_model():
+    return _loaded_builtin("ned_doppler18")
+
+
+@pytest.fixture(scope="session")
+def paper_derived():
+    return _derived_builtin("ned_doppler18")
 
 
 @pytest.fixture(scope="session")

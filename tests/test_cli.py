@@ -64,7 +64,18 @@ def test_generate_writes_python_and_c(runner, tmp_path):
 
 @pytest.mark.flight
 @pytest.mark.compile
-def test_run_does_the_main_job_end_to_end(runner, tmp_path, monkeypatch):
+def test_run_does_the_main_job_end_to_end(runner, tmp_path, monkeypatch, derived_builtin, mechanization_models):
+    from modelgen import jobs
+    from modelgen.checks import mechanizations
+    from modelgen.model.loading import builtin_models
+
+    # the job derives each built-in model (jobs.load_and_derive: derive(load_model(name))) and the mechanization
+    # checks' three models as the session's fixtures do (tests/conftest.py): the same objects, which this worker's
+    # later tests then take instead of loading the models again
+    load_and_derive = jobs.load_and_derive
+    monkeypatch.setattr(jobs, "load_and_derive",
+                        lambda model: derived_builtin(model) if str(model) in builtin_models() else load_and_derive(model))
+    monkeypatch.setattr(mechanizations, "derive_mechanization_models", lambda: mechanization_models)
     monkeypatch.chdir(tmp_path)
     result = runner.invoke(main, ["run", "--no-figures", "--no-simulate"])
     assert result.exit_code == 0, result.output

@@ -39,13 +39,13 @@ EAST, NORTH = math.pi / 2, 0.0
 
 
 @pytest.fixture(scope="module")
-def ned():
-    return derive(load_model("ned_doppler18"))
+def ned(paper_derived):
+    return paper_derived
 
 
 @pytest.fixture(scope="module")
-def ins_gps():
-    return derive(load_model("ins_gps15"))
+def ins_gps(derived_builtin):
+    return derived_builtin("ins_gps15")
 
 
 def ned_values(model, heading: float, speed: float = 250.0) -> dict[str, float]:

@@ -35,8 +35,8 @@ def correlation_condition(P: np.ndarray) -> float:
 
 
 @pytest.fixture(scope="module")
-def gps15_derived():
-    return derive(load_model("ins_gps15"))
+def gps15_derived(derived_builtin):
+    return derived_builtin("ins_gps15")
 
 
 def generated_folder(derived, root):
@@ -64,11 +64,11 @@ def test_paper_model_declares_the_paper_scenario(paper_derived):
         assert value == pytest.approx(paper.parameters[name], rel=1e-15, abs=0), name
 
 
-def test_every_builtin_model_declares_its_check_scenario():
+def test_every_builtin_model_declares_its_check_scenario(loaded_builtin):
     from modelgen.model.loading import builtin_models
 
     for name in builtin_models():
-        spec = load_model(name).check
+        spec = loaded_builtin(name).check  # load_model(name), once per session (tests/conftest.py)
         assert spec is not None and spec.steps >= 100 and spec.step_s > 0, name
 
 
@@ -157,14 +157,14 @@ def test_a_wrong_coefficient_in_the_c_is_caught(conditioning, paper_derived, pap
 
 @pytest.mark.compile
 @pytest.mark.parametrize("name", ["ned_inertial16", "gps_pseudorange11", "ned_doppler32_augmented", "ins_gnss21"])
-def test_every_builtin_model_passes_its_declared_check(name, tmp_path):
+def test_every_builtin_model_passes_its_declared_check(name, tmp_path, derived_builtin):
     """A correct model never fails: unaided, pseudo-range, augmented-transform and 21-state code over their own scenarios.
 
     (``modelgen run`` checks every built-in model the same way.)
     """
     from modelgen.jobs import check
 
-    derived = derive(load_model(name))
+    derived = derived_builtin(name)
     results = check(derived, generated_folder(derived, tmp_path))
     assert all("check scenario" in r.scenario for r in results)
     assert all(r.passed() for r in results), results

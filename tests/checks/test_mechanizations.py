@@ -18,8 +18,9 @@ from modelgen.jobs import mechanizations_section, missed_targets, run_report
 
 
 @pytest.fixture(scope="module")
-def checks():
-    return mech.run_mechanization_checks()
+def checks(mechanization_models):
+    """The run's checks over the session's derived models (tests/conftest.py: derive_mechanization_models(), once)."""
+    return mech.run_mechanization_checks(mechanization_models)
 
 
 def _report(checks) -> str:

@@ -19,10 +19,8 @@ from click.testing import CliRunner
 from modelgen.checks.paper_check import verify
 from modelgen.checks.paper_table import load_paper_table, paper_table_path
 from modelgen.cli import main
-from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path
-from modelgen.model.loading import load_model
 
 DATA = Path(__file__).parent / "data"
 USER_TABLE = DATA / "enu_doppler18_user_table.yaml"
@@ -30,8 +28,8 @@ SCHEMA = data_path() / "verify_table.schema.json"
 
 
 @pytest.fixture(scope="module")
-def enu_derived():
-    return derive(load_model("enu_doppler18"))
+def enu_derived(derived_builtin):
+    return derived_builtin("enu_doppler18")
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,6 @@ import pytest
 from modelgen.codegen.options import CodegenOptions
 from modelgen.derivation.symbolic import derive, parameter_vector
 from modelgen.derivation.discretization import DEFAULT_TOLERANCE, nominal_scaling, taylor_discretization, taylor_process_noise
-from modelgen.model.loading import load_model
 from tests.codegen.generated_support import build
 from tests.derivation.test_discretization import MODELS, STEPS, bound, exact, relative_error
 
@@ -27,12 +26,12 @@ FLOAT_MAX = float(np.finfo(np.float32).max)
 
 
 @pytest.fixture(scope="module", params=["paper", "ins_gps15"])
-def case(request, paper_derived, level_flight, tmp_path_factory):
+def case(request, paper_derived, derived_builtin, level_flight, tmp_path_factory):
     """(derived model, parameter values, {options slug: built code})."""
     if request.param == "paper":
         derived, values = paper_derived, level_flight
     else:
-        derived = derive(load_model("ins_gps15"))
+        derived = derived_builtin("ins_gps15")
         values = yaml.safe_load((MODELS / "ins_gps15.yaml").read_text())["check"]["parameters"]
     root = tmp_path_factory.mktemp(request.param)
     options = [CodegenOptions(), CodegenOptions(scalar="float"), CodegenOptions(form="ud")]

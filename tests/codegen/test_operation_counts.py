@@ -23,8 +23,6 @@ from modelgen.codegen.generate import generate_code
 from modelgen.codegen.kernels import thornton_cost
 from modelgen.codegen.options import CodegenOptions, all_combinations
 from modelgen.codegen.structure import filter_structure
-from modelgen.derivation.symbolic import derive
-from modelgen.model.loading import load_model
 
 KERNEL = re.compile(r"^\w+ \w+ ((?:phi_times_p|propagate|phi_times_u)_row_\d+|state_predict)\(.*?\n\{\n(.*?)\n\}\n", re.S | re.M)
 
@@ -81,8 +79,8 @@ def printed_predict_count(header: str) -> tuple[int, int]:
 @pytest.mark.parametrize(
     "options", [CodegenOptions(), CodegenOptions(storage="packed"), CodegenOptions(form="ud")], ids=lambda o: o.slug()
 )
-def test_printed_predict_count_is_the_count_of_the_emitted_statements(name, options, paper_derived):
-    derived = paper_derived if name == "ned_doppler18" else derive(load_model(name))
+def test_printed_predict_count_is_the_count_of_the_emitted_statements(name, options, derived_builtin):
+    derived = derived_builtin(name)
     files = generate_code(derived, options).files
     mul, add = emitted_predict_count(files[f"{name}.c"], name)
     printed_mul, printed_add = printed_predict_count(files[f"{name}.h"])

@@ -205,12 +205,10 @@ def test_every_combination_generates_byte_identical_output_across_processes(pape
     ids=lambda v: v if isinstance(v, str) else v.slug(),
 )
 @pytest.mark.compile
-def test_other_models_match_the_reference_in_other_combinations(name, options, tmp_path):
-    from modelgen.derivation.symbolic import derive
-    from modelgen.model.loading import load_model
+def test_other_models_match_the_reference_in_other_combinations(name, options, tmp_path, derived_builtin):
     from modelgen.jobs import synthetic_scenario
 
-    derived = derive(load_model(name))
+    derived = derived_builtin(name)
     scenario = synthetic_scenario(derived, steps=60)
     folder = write_atomically(tmp_path / "f", generate_code(derived, options).files)
     library = compile_shared_library([folder / f"{name}.c"], folder / f"lib{name}.so", ("-O1",))

@@ -26,9 +26,8 @@ from modelgen.derivation.discretization import (
     taylor_process_noise,
     van_loan_discretization,
 )
-from modelgen.derivation.symbolic import derive, parameter_vector
+from modelgen.derivation.symbolic import parameter_vector
 from modelgen.jobs import synthetic_scenario
-from modelgen.model.loading import load_model
 from tests.codegen.generated_support import build
 from tests.derivation.test_discretization import bound, exact, relative_error
 
@@ -38,9 +37,9 @@ STEPS = [1e-3, 0.00247, 0.148, 1.0, 60.0, 600.0, 3600.0, 86400.0]
 
 
 @pytest.fixture(scope="module")
-def augmented(tmp_path_factory):
+def augmented(tmp_path_factory, derived_builtin):
     """The 32-state model, its manoeuvre operating point, and its generated C and Python (default options)."""
-    derived = derive(load_model("ned_doppler32_augmented"))
+    derived = derived_builtin("ned_doppler32_augmented")
     values = synthetic_scenario(derived).parameters
     built = build(derived, tmp_path_factory.mktemp("augmented32"), CodegenOptions())
     return derived, values, built

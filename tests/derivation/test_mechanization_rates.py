@@ -52,14 +52,23 @@ def _generated(path: Path):
     return rates, model_rates(python_source(rates), rates.model)
 
 
+@pytest.fixture(scope="module")
+def drive():
+    """The drive's 21-state model (NED_MODEL), loaded once for the module, with its rates and their compiled function."""
+    model = load_model(NED_MODEL)
+    rates = mechanization_rates(model)
+    return model, rates, model_rates(python_source(rates), rates.model)
+
+
 def _relative(a, b):
     return np.abs(np.asarray(a) - np.asarray(b)) / np.maximum(np.abs(np.asarray(b)), 1e-30)
 
 
 @pytest.mark.parametrize("path", [NED_MODEL, ENU_MODEL], ids=["ned_21_state", "enu_15_state"])
-def test_generated_rates_equal_the_hand_written_strapdown_physics(path):
+def test_generated_rates_equal_the_hand_written_strapdown_physics(path, request):
     """NED (21 states) and ENU (15 states) models: each output within 1e-12 relative (or 1e-18 absolute)."""
-    _, function = _generated(path)
+    # NED_MODEL: the module's drive fixture (loaded and compiled once); the ENU model here
+    _, function = request.getfixturevalue("drive")[1:] if path == NED_MODEL else _generated(path)
     for lat, lon, h, *v in POINTS:
         got = np.array(function(math.radians(lat), math.radians(lon), h, *v))
         want = _hand_written(math.radians(lat), math.radians(lon), h, *v, GPS_EARTH_RATE)
@@ -67,16 +76,15 @@ def test_generated_rates_equal_the_hand_written_strapdown_physics(path):
         assert close.all(), (lat, got - want)
 
 
-def test_generated_rates_equal_the_models_symbolic_mechanization():
+def test_generated_rates_equal_the_models_symbolic_mechanization(drive):
     """The printed function against the model's own mechanization object, evaluated symbol by symbol."""
-    model = load_model(NED_MODEL)
+    model, _, function = drive
     problem = model.navigation
     mech = problem.mechanization()
     force = sp.zeros(3, 1)
     state = NavigationState(problem.attitude, problem.velocity, problem.position, force, problem.body_rate,
                             problem.position, problem.position)
     symbolic = sp.Matrix.vstack(mech.velocity_rate(state), mech.position_rate(state), mech.navigation_rate(state))
-    _, function = _generated(NED_MODEL)
     L, lam, h = problem.position
     for lat, lon, height, *v in POINTS:
         latitude = math.radians(lat)
@@ -97,32 +105,32 @@ def _variant(tmp_path: Path, name: str, old: str, new: str) -> Path:
     return path
 
 
-def test_a_velocity_equation_the_model_writes_is_the_one_flown(tmp_path):
+def test_a_velocity_equation_the_model_writes_is_the_one_flown(tmp_path, drive):
     """A model that writes v' without the Coriolis term gets a mechanization without it (one source)."""
     path = _variant(tmp_path, "no_coriolis", "  approximations:",
                     '  equations: {velocity: "f_n - cross(omega_en_n, v_n) + g_n"}\n  approximations:')
     written, function = _generated(path)
-    _, drive = _generated(NED_MODEL)
+    flown = drive[2]
     lat, lon, h, vn, ve, vd = (math.radians(51.0), 0.1, 100.0, 10.0, 20.0, 1.0)
-    got, exact = np.array(function(lat, lon, h, vn, ve, vd)), np.array(drive(lat, lon, h, vn, ve, vd))
+    got, exact = np.array(function(lat, lon, h, vn, ve, vd)), np.array(flown(lat, lon, h, vn, ve, vd))
     wie = np.array([GPS_EARTH_RATE * math.cos(lat), 0.0, -GPS_EARTH_RATE * math.sin(lat)])
     assert got[0:3] - exact[0:3] == pytest.approx(2.0 * np.cross(wie, [vn, ve, vd]), rel=1e-9)
     assert got[3:] == pytest.approx(exact[3:], rel=1e-15)
     assert "0.000145842302934" not in python_source(written)  # 2 w_ie is gone from the printed function
 
 
-def test_error_model_approximations_do_not_reach_the_mechanization(tmp_path):
+def test_error_model_approximations_do_not_reach_the_mechanization(tmp_path, drive):
     """Without lever_arm_at_computed_position, constant_radii, gravity_height_only, free_air_gradient the error
     model differs, the rates do not."""
     path = _variant(tmp_path, "exact_error_model",
                     "approximations: [lever_arm_at_computed_position, constant_radii, gravity_height_only, free_air_gradient]",
                     "approximations: []")
-    exact, drive = load_model(path), load_model(NED_MODEL)
-    assert exact.dynamics != drive.dynamics  # the error models differ (dR/dL, dg/dL, the gravity gradient)
-    assert mechanization_rates(exact).outputs == mechanization_rates(drive).outputs
+    exact, (model, rates, _) = load_model(path), drive
+    assert exact.dynamics != model.dynamics  # the error models differ (dR/dL, dg/dL, the gravity gradient)
+    assert mechanization_rates(exact).outputs == rates.outputs
 
 
-def test_the_c_function_equals_the_python_function(tmp_path):
+def test_the_c_function_equals_the_python_function(tmp_path, drive):
     """The C printed from the same expressions, compiled strictly (C99, -Werror), gives the Python numbers."""
     import ctypes
     import shutil
@@ -131,7 +139,7 @@ def test_the_c_function_equals_the_python_function(tmp_path):
     compiler = shutil.which("cc") or shutil.which("gcc")
     if compiler is None:
         pytest.skip("no C compiler")
-    rates, function = _generated(NED_MODEL)
+    _, rates, function = drive
     source = tmp_path / "rates.c"
     source.write_text("#include <math.h>\n" + c_source(rates) + "void rates(const double *x, double *out)\n"
                       "{ navigation_rates(x[0], x[1], x[2], x[3], x[4], x[5], out); }\n")

@@ -4,13 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from modelgen.derivation.symbolic import derive
-from modelgen.model.loading import load_model
-
 
 @pytest.fixture(scope="session")
-def enu_derived():
-    return derive(load_model("enu_doppler18"))
+def enu_derived(derived_builtin):
+    return derived_builtin("enu_doppler18")
 
 
 @pytest.fixture(scope="session")

@@ -106,15 +106,17 @@ def test_latex_columns_add_up_to_less_than_the_text_width(enu_derived):
 
 
 @pytest.fixture(scope="module")
-def builtin_latex_folder(tmp_path_factory):
-    """Every built-in model's LaTeX table, derived and written once for both paper sizes: (folder, \\input lines)."""
-    from modelgen.jobs import load_and_derive
+def builtin_latex_folder(tmp_path_factory, derived_builtin):
+    """Every built-in model's LaTeX table, written once for both paper sizes: (folder, \\input lines).
+
+    The models are the session's (tests/conftest.py: load_and_derive, once per worker).
+    """
     from modelgen.model.loading import builtin_models
 
     folder = tmp_path_factory.mktemp("latex")
     inputs = []
     for name in builtin_models():
-        (folder / f"{name}.tex").write_text(to_latex(load_and_derive(name)), encoding="utf-8")
+        (folder / f"{name}.tex").write_text(to_latex(derived_builtin(name)), encoding="utf-8")
         inputs.append(f"\\input{{{name}.tex}}\\clearpage")
     return folder, inputs
 

@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
-from modelgen.model.loading import load_model, load_model_text
+from modelgen.model.loading import load_model_text
 from modelgen.model.loading import builtin_model_path
 
 NAV = builtin_model_path("ins_gnss21_nav").read_text()
@@ -23,18 +23,18 @@ def _skew(a):
 
 
 @pytest.fixture(scope="module")
-def phi_and_body():
-    phi = load_model("ins_gnss21_nav")
+def phi_and_body(derived_builtin):
+    phi = derived_builtin("ins_gnss21_nav").model
     body = load_model_text(BODY, filename="body.yaml")
     values = {**dict(phi.parameter_defaults()), **phi.check.parameter_values()}
     # orthogonal to rounding (the scenario's 12 digits leave C C^T - I ~ 1e-12, which the symbolic C^T C = I step meets)
     C = Rotation.from_euler("ZYX", [30, 2, 1], degrees=True).as_matrix()
     values.update({f"c{i + 1}{j + 1}": C[i, j] for i in range(3) for j in range(3)})
-    return phi, body, derive(phi).numeric(values), derive(body).numeric({k: v for k, v in values.items() if k in body.parameter_names}), values
+    return phi, body, derived_builtin("ins_gnss21_nav").numeric(values), derive(body).numeric({k: v for k, v in values.items() if k in body.parameter_names}), values
 
 
-def test_a_navigation_axes_rotation_vector_is_the_phi_angle_to_first_order():
-    phi = derive(load_model("ins_gnss21_nav"))
+def test_a_navigation_axes_rotation_vector_is_the_phi_angle_to_first_order(derived_builtin):
+    phi = derived_builtin("ins_gnss21_nav")
     rotation = derive(load_model_text(NAVIGATION_AXES, filename="nav.yaml"))
     assert phi.F == rotation.F and phi.G == rotation.G and phi.H == rotation.H
 

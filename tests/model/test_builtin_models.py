@@ -34,9 +34,9 @@ RNG = np.random.default_rng(20240501)
 
 
 @pytest.fixture(scope="module")
-def models():
+def models(derived_builtin):
     names = ("ned_doppler18", "ned_inertial16", "enu_doppler18", "ins_gps15", "gps_pseudorange11")
-    return {name: derive(load_model(name)) for name in names}
+    return {name: derived_builtin(name) for name in names}
 
 
 def sym(name: str) -> sp.Symbol:

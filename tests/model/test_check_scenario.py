@@ -163,8 +163,8 @@ def _with_sigma(text: str) -> str:
     return _NAV.replace(_SIGMA_BY_NAME, text)
 
 
-def test_initial_sigma_by_vector_stem_equals_the_same_sigmas_by_state_name():
-    by_name = load_model("ins_gnss21_nav").check
+def test_initial_sigma_by_vector_stem_equals_the_same_sigmas_by_state_name(loaded_builtin):
+    by_name = loaded_builtin("ins_gnss21_nav").check
     stems = _with_sigma(
         "  initial_sigma: {position_error: [5.0, 5.0, 8.0], velocity_error: [0.2, 0.2, 0.3],\n"
         "    attitude_error: {value: [0.05, 0.05, 0.5], unit: deg}, gyro_bias: {value: 0.01, unit: deg/h},\n"

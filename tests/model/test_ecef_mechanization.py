@@ -35,17 +35,16 @@ import numpy as np
 import pytest
 
 from modelgen.checks import mechanizations as mech
-from modelgen.checks.mechanizations import ECEF_MODEL, POINTS, POINT_IDS, LOCAL_LEVEL_TWIN, LOCAL_LEVEL_TWIN_NAME
+from modelgen.checks.mechanizations import ECEF_MODEL, POINTS, POINT_IDS
 from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
-from modelgen.model.loading import builtin_model_path, load_model, load_model_text
+from modelgen.model.loading import builtin_model_path, load_model_text
 
 
 @pytest.fixture(scope="module")
-def models():
-    ecef = load_model(ECEF_MODEL)
-    local = load_model_text(LOCAL_LEVEL_TWIN, filename=LOCAL_LEVEL_TWIN_NAME)
-    return derive(ecef), derive(local)
+def models(mechanization_models):
+    ecef, local, _ = mechanization_models  # derive(load_model(ECEF_MODEL)), derive(LOCAL_LEVEL_TWIN): tests/conftest.py
+    return ecef, local
 
 
 @pytest.mark.parametrize("point", POINTS, ids=POINT_IDS)
@@ -66,8 +65,8 @@ def test_a_comparison_outside_its_bound_fails():
     assert not mech.Comparison("x", "p", "F", 0.0, 1e-20, "must show", at_least=True).passed
 
 
-def test_ecef_model_has_e_frame_states_and_parameters():
-    model = load_model(ECEF_MODEL)
+def test_ecef_model_has_e_frame_states_and_parameters(mechanization_models):
+    model = mechanization_models[0].model  # load_model(ECEF_MODEL)
     names = [s.name for s in model.states]
     assert names[:9] == [f"{q}_error_{a}" for q in ("position", "velocity", "attitude") for a in "xyz"]
     parameters = {p.name for p in model.parameters}

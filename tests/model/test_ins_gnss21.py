@@ -15,14 +15,13 @@ import math
 import numpy as np
 import pytest
 
-from modelgen.derivation.symbolic import derive, parameter_vector
-from modelgen.model.loading import load_model
+from modelgen.derivation.symbolic import parameter_vector
 from modelgen.jobs import check_scenario
 
 
 @pytest.fixture(scope="module")
-def derived():
-    return derive(load_model("ins_gnss21"))
+def derived(derived_builtin):
+    return derived_builtin("ins_gnss21")
 
 
 def skew(a: np.ndarray) -> np.ndarray:

@@ -36,7 +36,6 @@ import numpy as np
 import pytest
 
 from modelgen.derivation.symbolic import derive
-from modelgen.model.loading import load_model
 from modelgen.model.navigation_model.approximation_notes import neglected_terms
 
 
@@ -104,8 +103,8 @@ def _textbook(p: dict[str, float]):
 
 
 @pytest.fixture(scope="module")
-def model():
-    return load_model("ins_gnss21_nav")
+def model(loaded_builtin):
+    return loaded_builtin("ins_gnss21_nav")
 
 
 def _values(model):

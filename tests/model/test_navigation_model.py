@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 
 from modelgen.derivation.symbolic import derive
-from modelgen.model.loading import load_model
 from modelgen.model.navigation_model.approximation_notes import neglected_terms
 
 
@@ -28,30 +27,30 @@ TWINS = ("ins_gps15", "gps_pseudorange11")
 
 
 @pytest.fixture(scope="module")
-def ins_gps15_pair():
-    return load_model("ins_gps15"), load_model("ins_gps15_twin")
+def ins_gps15_pair(loaded_builtin):
+    return loaded_builtin("ins_gps15"), loaded_builtin("ins_gps15_twin")
 
 
 @pytest.mark.parametrize("hand_name", TWINS)
-def test_twin_declares_the_hand_models_states_noises_and_measurements_in_order(hand_name):
-    hand, twin = load_model(hand_name), load_model(f"{hand_name}_twin")
+def test_twin_declares_the_hand_models_states_noises_and_measurements_in_order(hand_name, loaded_builtin):
+    hand, twin = loaded_builtin(hand_name), loaded_builtin(f"{hand_name}_twin")
     assert [(s.name, s.symbol) for s in twin.states] == [(s.name, s.symbol) for s in hand.states]
     assert [(n.name, n.symbol) for n in twin.noises] == [(n.name, n.symbol) for n in hand.noises]
     assert [(m.name, m.symbol) for m in twin.measurements] == [(m.name, m.symbol) for m in hand.measurements]
 
 
 @pytest.mark.parametrize("hand_name", TWINS)
-def test_twin_F_G_H_Q_R_equal_the_hand_model_at_its_check_scenario(hand_name):
+def test_twin_F_G_H_Q_R_equal_the_hand_model_at_its_check_scenario(hand_name, loaded_builtin):
     """ins_gps15 (phi-angle, geodetic position) and Benson's psi-angle pseudo-range model, derived."""
-    hand, twin = load_model(hand_name), load_model(f"{hand_name}_twin")
+    hand, twin = loaded_builtin(hand_name), loaded_builtin(f"{hand_name}_twin")
     derived, written = _numeric(twin), _numeric(hand)
     for key in "FGHQR":
         scale = np.maximum(1.0, np.abs(written[key]))
         assert np.all(np.abs(derived[key] - written[key]) <= 1e-14 * scale), key
 
 
-def test_pseudorange_twin_drops_only_spherical_earth_and_gravity_terms_and_sizes_them():
-    twin = load_model("gps_pseudorange11_twin")
+def test_pseudorange_twin_drops_only_spherical_earth_and_gravity_terms_and_sizes_them(loaded_builtin):
+    twin = loaded_builtin("gps_pseudorange11_twin")
     terms = neglected_terms(twin)
     assert {t.approximation for t in terms} == {"gravity_height_only", "free_air_gradient", "no_height_in_radii", "single_earth_radius"}
     assert all(t.matrix == "F" for t in terms)  # H (line of sight, clock) is exact: the range is linearized, not approximated

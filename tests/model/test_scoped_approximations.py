@@ -15,7 +15,7 @@ import pytest
 
 from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
-from modelgen.model.loading import builtin_model_path, load_model, load_model_text
+from modelgen.model.loading import builtin_model_path, load_model_text
 
 NAV = builtin_model_path("ins_gnss21_nav").read_text()
 WHOLE = "approximations: [lever_arm_at_computed_position, constant_radii, gravity_height_only, free_air_gradient]"
@@ -29,9 +29,9 @@ def _numbers(text, name):
     return model, derive(model).numeric(values)
 
 
-def test_a_scoped_approximation_applies_to_its_rows_only_exactly():
-    whole_model = load_model("ins_gnss21_nav")
-    whole = derive(whole_model).numeric({**dict(whole_model.parameter_defaults()), **whole_model.check.parameter_values()})
+def test_a_scoped_approximation_applies_to_its_rows_only_exactly(derived_builtin):
+    whole_model = derived_builtin("ins_gnss21_nav").model
+    whole = derived_builtin("ins_gnss21_nav").numeric({**dict(whole_model.parameter_defaults()), **whole_model.check.parameter_values()})
     scoped_model, scoped = _numbers(SCOPED, "scoped")
     _, without = _numbers(WITHOUT, "without")
     names = [s.name for s in scoped_model.states]

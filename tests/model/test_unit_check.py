@@ -56,8 +56,8 @@ def test_unknown_units_are_refused():
 
 
 @pytest.mark.parametrize("name", builtin_models())
-def test_every_shipped_model_passes_the_unit_check(name):
-    load_model(name)  # the loader checks the units
+def test_every_shipped_model_passes_the_unit_check(name, loaded_builtin):
+    loaded_builtin(name)  # load_model checks the units (once per session for every test: tests/conftest.py)
 
 
 def test_the_navigator_model_passes_the_unit_check():

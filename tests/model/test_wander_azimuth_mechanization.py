@@ -33,8 +33,6 @@ import pytest
 
 from modelgen.checks import mechanizations as mech
 from modelgen.checks.mechanizations import (
-    LOCAL_LEVEL_TWIN,
-    LOCAL_LEVEL_TWIN_NAME,
     POINT_IDS,
     POINTS,
     WANDER_MODEL,
@@ -47,19 +45,19 @@ from modelgen.checks.mechanizations import (
 )
 from modelgen.derivation.symbolic import derive
 from modelgen.model import wgs84
-from modelgen.model.loading import load_model, load_model_text
+from modelgen.model.loading import load_model_text
 
 W = wgs84.GPS_EARTH_RATE
 
 
 @pytest.fixture(scope="module")
-def wander():
-    return derive(load_model(WANDER_MODEL))
+def wander(mechanization_models):
+    return mechanization_models[2]  # derive(load_model(WANDER_MODEL)), once per session (tests/conftest.py)
 
 
 @pytest.fixture(scope="module")
-def local_level():
-    return derive(load_model_text(LOCAL_LEVEL_TWIN, filename=LOCAL_LEVEL_TWIN_NAME))
+def local_level(mechanization_models):
+    return mechanization_models[1]  # derive(load_model_text(LOCAL_LEVEL_TWIN, filename=LOCAL_LEVEL_TWIN_NAME))
 
 
 # -- the wander-azimuth navigation equations, typed here (numpy) -----------------------------------------------

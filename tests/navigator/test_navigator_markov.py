@@ -184,7 +184,7 @@ def test_an_error_state_without_a_steady_state_is_refused_naming_the_model_file_
 
 @pytest.mark.compile
 @pytest.mark.flight
-def test_the_24_state_model_flies_alike_in_python_and_c_and_its_states_change_the_flight():
+def test_the_24_state_model_flies_alike_in_python_and_c_and_its_states_change_the_flight(spec24):
     """60 s of the drive: C against Python at every epoch (1 mm, as the 21-state test); the Gauss-Markov states
     change the trajectory against the same configuration with them nearly switched off."""
     import dataclasses
@@ -198,12 +198,11 @@ def test_the_24_state_model_flies_alike_in_python_and_c_and_its_states_change_th
     from modelgen.navigator.cnav import cached_c_navigator, fly_c, log_arrays
     from modelgen.navigator.logs import read_gnss, read_imu
     from modelgen.navigator.navigator import prepare
-    from modelgen.navigator.spec import navigator_spec
 
     config = both.config
     quiet = dataclasses.replace(config, parameters={**config.parameters, "gnss_error_sigma": 1e-6})
     inputs = prepare(quiet, read_imu(quiet.imu_source, quiet.gap_factor, quiet.gap_action), read_gnss(quiet.gnss_source))
-    spec = navigator_spec(MODELS / "ins_gnss24_gm_nav.yaml", with_python=False)
+    spec = spec24  # the module's spec of ins_gnss24_gm_nav.yaml (navigator_spec), not derived again
     navigator, _ = cached_c_navigator(spec, rest_max=log_arrays(quiet, inputs, spec).rest_max)
     off, _ = fly_c(quiet, inputs, navigator)
     ok = ~np.isnan(off.outputs[:, 1]) & ~np.isnan(both.flight.outputs[:, 1])

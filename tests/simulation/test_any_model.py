@@ -8,7 +8,6 @@ import yaml
 
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path
-from modelgen.jobs import load_and_derive
 from modelgen.simulation.aiding import operating_point
 from modelgen.simulation.filters import named_parameters
 from modelgen.simulation.flight_report import simulate
@@ -20,8 +19,8 @@ BODY = ["body_rate_x", "body_rate_y", "body_rate_z", "body_specific_force_x", "b
 
 
 @pytest.fixture(scope="module")
-def augmented():
-    return load_and_derive("ned_doppler32_augmented")
+def augmented(derived_builtin):
+    return derived_builtin("ned_doppler32_augmented")  # load_and_derive, once per session
 
 
 def _vocabulary(profile) -> dict[str, float]:
