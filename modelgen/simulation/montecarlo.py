@@ -224,8 +224,16 @@ class RunOutput:
 
 def setup_key(profile: FlightProfile, truth_profile: FlightProfile | None, model: ErrorModel, mode: str,
               store_every: int, implementation: str) -> str:
-    """A digest of the set-up: equal set-ups share a worker's derived model, trajectory and compiled filter."""
-    blob = pickle.dumps((profile, truth_profile, model, mode, store_every, implementation))
+    """A digest of the set-up: equal set-ups share a worker's derived model, trajectory and compiled filter.
+
+    The model enters by its canonical declaration hash (:func:`modelgen.codegen.description.model_hash`), not by
+    its pickle: a model's pickle changes once the process has derived it (what the derivation carries on it and
+    sympy's caches), so the same study got another key in a process that had loaded the model before, and a
+    journal of it was refused as another study's.
+    """
+    from modelgen.codegen.description import model_hash
+
+    blob = pickle.dumps((profile, truth_profile, model_hash(model), mode, store_every, implementation))
     return "montecarlo-" + hashlib.sha256(blob).hexdigest()[:16]
 
 

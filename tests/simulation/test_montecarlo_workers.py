@@ -295,3 +295,29 @@ def test_only_a_first_import_freezes_what_the_collector_sees(tmp_path, monkeypat
     finally:
         gc.unfreeze()
         sys.modules.pop("modelgen_test_task_code", None)
+
+
+_KEY_OF_A_FRESH_LOAD = """
+import sys
+from modelgen.model.loading import load_model
+from modelgen.simulation.montecarlo import setup_key
+from modelgen.simulation.scenario import load_profile
+if sys.argv[1] == "derived first":
+    from modelgen.jobs import load_and_derive
+    load_and_derive("ned_doppler18")
+print(setup_key(load_profile("profile_000"), None, load_model("ned_doppler18"), "closed_loop", 1, "reference"))
+"""
+
+
+def test_the_set_up_key_of_a_study_does_not_depend_on_what_the_process_loaded_before():
+    """The same study has the same key in a fresh process and in one that has loaded and derived its model before
+    (a suite worker, an API user's second study): before, the key hashed the model's pickle, which derivation
+    changes, so a --journal resume was refused as another study's depending on the process's history."""
+    import os
+    import subprocess
+
+    repo = str(Path(__file__).resolve().parents[2])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([repo, os.environ.get("PYTHONPATH", "")])}
+    keys = [subprocess.run([sys.executable, "-c", _KEY_OF_A_FRESH_LOAD, history], capture_output=True, text=True,
+                           env=env, timeout=300, check=True).stdout.strip() for history in ("fresh", "derived first")]
+    assert keys[0].startswith("montecarlo-") and keys[0] == keys[1], keys
