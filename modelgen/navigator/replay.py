@@ -18,7 +18,7 @@ from modelgen.navigator.logs import read_gnss, read_imu
 from modelgen.navigator.metrics import (errors_against_reference, pooled_consistency, schedule_record, summary,
                                         velocity_latency)
 from modelgen.navigator.navigator import Flight, fly, prepare
-from modelgen.navigator.spec import navigator_spec
+from modelgen.navigator.spec import spec_of
 from modelgen.navigator.report import report_files
 from modelgen.navigator.smoother import ForwardRecord, GeneratedPython, backward_pass, smooth_flight, smoothing_summary
 from modelgen.fileio.output import write_atomically
@@ -88,12 +88,16 @@ def run_replay(config_path: str | Path, out: Path | None, echo: Callable[[str], 
         echo(f"  note: {note}")
     timings["read_s"] = time.perf_counter() - start
     model_file = model_path(config.model, config.origin("model"), config.where("model"))
-    check_navigation_model(config, model_file)
-    flights: dict[str, Flight] = {}
     mark = time.perf_counter()
+    from modelgen.derivation.symbolic import derive
+    from modelgen.model.loading import load_model
+
+    model = load_model(model_file)  # the one load of this replay: checked, then derived once
+    check_navigation_model(config, model_file, model)
+    flights: dict[str, Flight] = {}
     echo(f"  deriving {config.model} (once) with modelgen")
     # the one derivation of this replay: the Python navigator, the C and the embedded build all use it
-    spec = navigator_spec(model_file, with_python=navigator in ("python", "both"))
+    spec = spec_of(derive(model), model_file, with_python=navigator in ("python", "both"))
     spec.check_config(config)
     timings["generate_python_s"] = time.perf_counter() - mark
     if navigator in ("python", "both"):
@@ -215,11 +219,12 @@ def _smoothed_passes(recorded: Flight, echo: Callable[[str], None], backward) ->
 BUILTIN_NAVIGATOR_MODEL = "ins_gps15_nav"
 
 
-def check_navigation_model(config: NavigatorConfig, model_file: Path) -> None:
+def check_navigation_model(config: NavigatorConfig, model_file: Path, model) -> None:
     """Refuse, in one line and before any code is generated or compiled, a model the navigator cannot fly.
 
     A model with a ``navigation:`` section is the navigator's to generate; a model without one flies only with
     the error states of the built-in navigator model, in its order (the hand-written error-state layout).
+    ``model`` is the model file, loaded (the replay's one load); the built-in one is loaded only if it is another.
     """
     from modelgen.fileio.datafiles import read_yaml
     from modelgen.model.loading import load_model
@@ -231,9 +236,11 @@ def check_navigation_model(config: NavigatorConfig, model_file: Path) -> None:
     reference = read_yaml(reference_file, "model file")
     if "navigation" in reference:
         wanted = None  # the built-in navigator model is a navigation model itself: so must every model be
+    elif Path(reference_file).resolve() == Path(model_file).resolve():
+        wanted = [s.name for s in model.states]
     else:
         wanted = [s.name for s in load_model(reference_file).states]
-    states = [s.name for s in load_model(model_file).states]
+    states = [s.name for s in model.states]
     if wanted is not None and states == wanted:
         return
     need = ("a model with a navigation: section" if wanted is None else

@@ -298,3 +298,18 @@ def test_float_filter_navigator_under_qemu_arm_stays_within_1_cm_of_the_double_c
     assert result.forbidden_symbols == []
     assert result.max_position_difference_m <= 0.01
     assert 0 < result.worst_case_stack["ins_gps15_nav_navigator_epoch"] < 4096
+
+
+def test_a_replay_loads_its_model_file_once_and_derives_it_once(monkeypatch):
+    """Issue 26 item 1, 'derive once per replay': the model file is loaded once (the navigation-model check and the
+    spec share it; before, a model written as equations was loaded three times) and derived once."""
+    import modelgen.derivation.symbolic as symbolic
+    import modelgen.model.loading as loading
+    from modelgen.navigator.replay import run_replay
+
+    loads, derivations = [], []
+    load, derive = loading.load_model, symbolic.derive
+    monkeypatch.setattr(loading, "load_model", lambda path, *a, **k: loads.append(path) or load(path, *a, **k))
+    monkeypatch.setattr(symbolic, "derive", lambda model, *a, **k: derivations.append(model) or derive(model, *a, **k))
+    run_replay(DATA / "excerpt.yaml", None, echo=lambda _: None)
+    assert [Path(p).name for p in loads] == ["ins_gps15_nav.yaml"] and len(derivations) == 1
