@@ -216,13 +216,15 @@ def test_written_navigation_equations_give_the_named_mechanizations_error_model(
     assert np.abs(no_coriolis["F"] - named["F"]).max() > 1e-5
 
 
-def test_a_pseudorange_s_displacement_at_the_computed_position_is_listed_among_the_approximations_declared_or_not():
+def test_a_pseudorange_s_displacement_at_the_computed_position_is_listed_among_the_approximations_declared_or_not(
+        loaded_builtin):
     """d = M (computed) (p - p_c) in a pseudo-range (rate) is an approximation (exact to first order: it drops no
     term): the twin declares it and its notes list it; a file that does not declare it has it listed anyway, naming
     the measurement that makes it.  Before, neither listed it."""
     from modelgen.model.loading import load_model_text
 
-    twin = [n for n in load_model("gps_pseudorange11_twin").notes if n.startswith("Approximation pseudorange_at_computed_position (")]
+    twin = [n for n in loaded_builtin("gps_pseudorange11_twin").notes
+            if n.startswith("Approximation pseudorange_at_computed_position (")]
     assert len(twin) == 1 and "M (computed)" in twin[0] and "dropped no term in this model" in twin[0]
     assert "declared or not" not in twin[0]
     notes = load_model_text(RANGE_RATE, "range_rate.yaml").notes
