@@ -55,7 +55,6 @@ from types import ModuleType, SimpleNamespace
 from typing import Sequence
 
 import numpy as np
-import sympy as sp
 
 from modelgen.codegen.mechanization import c_source, python_source
 from modelgen.derivation.mechanization_rates import mechanization_rates

@@ -13,7 +13,6 @@ import math
 import re
 from pathlib import Path
 
-import numpy as np
 import pytest
 import yaml
 
