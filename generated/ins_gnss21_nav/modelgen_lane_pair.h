@@ -10,6 +10,7 @@
 #ifndef MODELGEN_LANE_PAIR_H
 #define MODELGEN_LANE_PAIR_H
 
+#include <stdint.h>
 #include <string.h>
 
 #include "modelgen_scalar.h"
@@ -23,6 +24,23 @@ static inline lane_pair lane_pair_load(const double *a) /* a[0], a[1] */
     lane_pair lanes;
     memcpy(&lanes, a, sizeof lanes);
     return lanes;
+}
+
+/* the two lanes stored at a, 16-byte aligned: one aligned load (a value stored twice, as the
+   unrolled discretize's F h, is then broadcast without a shuffle; may_alias: read through a
+   double array) */
+typedef double lane_pair_stored
+    __attribute__((vector_size(2 * sizeof(double)), __may_alias__));
+
+static inline lane_pair lane_pair_load_aligned(const double *a) /* a[0], a[1], a 16-byte aligned */
+{
+    return *(const lane_pair_stored *)a;
+}
+
+/* 0 or 1: a + lane_pair_offset(a) is 16-byte aligned (a is a double's address) */
+static inline size_t lane_pair_offset(const double *a)
+{
+    return (size_t)(((uintptr_t)a / sizeof(double)) & 1u);
 }
 
 static inline lane_pair lane_pair_of(const double a, const double b)
@@ -42,6 +60,11 @@ static inline lane_pair lane_pair_add_product(const lane_pair acc, const lane_pa
                                               const lane_pair b)
 {
     return acc + a * b;
+}
+
+static inline lane_pair lane_pair_add(const lane_pair acc, const lane_pair a)
+{
+    return acc + a;
 }
 
 static inline double lane_pair_sum(const lane_pair acc)
@@ -68,6 +91,17 @@ static inline lane_pair lane_pair_load(const MODELGEN_SCALAR *a) /* a[0], a[1] *
     return lanes;
 }
 
+static inline lane_pair lane_pair_load_aligned(const MODELGEN_SCALAR *a) /* a[0], a[1] */
+{
+    return lane_pair_load(a);
+}
+
+static inline size_t lane_pair_offset(const MODELGEN_SCALAR *a) /* no alignment needed: 0 */
+{
+    (void)a;
+    return 0;
+}
+
 static inline lane_pair lane_pair_of(const MODELGEN_SCALAR a, const MODELGEN_SCALAR b)
 {
     lane_pair lanes;
@@ -90,6 +124,14 @@ static inline lane_pair lane_pair_add_product(const lane_pair acc, const lane_pa
     lane_pair lanes;
     lanes.lane[0] = acc.lane[0] + a.lane[0] * b.lane[0];
     lanes.lane[1] = acc.lane[1] + a.lane[1] * b.lane[1];
+    return lanes;
+}
+
+static inline lane_pair lane_pair_add(const lane_pair acc, const lane_pair a)
+{
+    lane_pair lanes;
+    lanes.lane[0] = acc.lane[0] + a.lane[0];
+    lanes.lane[1] = acc.lane[1] + a.lane[1];
     return lanes;
 }
 
