@@ -431,57 +431,87 @@ static const signed char balance_exponent[ENU_DOPPLER18_TWIN_N_STATES] = { -6, -
    power of two.  A plan on it that needs a doubling is retaken on rebalanced_norm. */
 static enu_doppler18_twin_scalar balanced_norm(const enu_doppler18_twin_matrices *restrict m)
 {
-    enu_doppler18_twin_scalar v, norm = 0.0;
-    v = fabs(m->F[0]) * 0.25 + fabs(m->F[1]) * 2.0 + fabs(m->F[2]) * 4096.0 + fabs(m->F[3]) *
-            131072.0 + fabs(m->F[4]) * 5.820766091346741e-11 + fabs(m->F[5]) * 5.820766091346741e-11
-            + fabs(m->F[6]) * 5.820766091346741e-11 + fabs(m->F[7]) * 5.820766091346741e-11 +
-            fabs(m->F[8]) * 5.820766091346741e-11 + fabs(m->F[9]) * 5.820766091346741e-11;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[10]) * 4.0 + fabs(m->F[11]) * 8.0 + fabs(m->F[12]) * 4096.0 + fabs(m->F[13]) * 8.0
-            + fabs(m->F[14]) * 524288.0 + fabs(m->F[15]) * 2.3283064365386963e-10 + fabs(m->F[16]) *
-            2.3283064365386963e-10 + fabs(m->F[17]) * 2.3283064365386963e-10 + fabs(m->F[18]) *
-            2.3283064365386963e-10 + fabs(m->F[19]) * 2.3283064365386963e-10 + fabs(m->F[20]) *
-            2.3283064365386963e-10;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[21]) * 0.5 + fabs(m->F[22]) * 0.125 + fabs(m->F[23]) * 512.0 + fabs(m->F[24]) +
-            fabs(m->F[25]) * 65536.0 + fabs(m->F[26]) * 2.9103830456733704e-11 + fabs(m->F[27]) *
-            2.9103830456733704e-11 + fabs(m->F[28]) * 2.9103830456733704e-11 + fabs(m->F[29]) *
-            2.9103830456733704e-11 + fabs(m->F[30]) * 2.9103830456733704e-11 + fabs(m->F[31]) *
-            2.9103830456733704e-11;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[32]) * 0.000244140625 + fabs(m->F[33]) * 0.001953125 + fabs(m->F[34]) +
-            fabs(m->F[35]) * 4.0 + fabs(m->F[36]) * 0.25 + fabs(m->F[37]) * 0.001953125 +
-            fabs(m->F[38]) * 128.0 + fabs(m->F[39]) * 5.684341886080802e-14 + fabs(m->F[40]) *
-            5.684341886080802e-14 + fabs(m->F[41]) * 5.684341886080802e-14;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[42]) * 0.000244140625 + fabs(m->F[43]) * 0.00048828125 + fabs(m->F[44]) * 0.25 +
-            fabs(m->F[45]) + fabs(m->F[46]) * 0.0625 + fabs(m->F[47]) * 0.00048828125 +
-            fabs(m->F[48]) * 32.0 + fabs(m->F[49]) * 1.4210854715202004e-14 + fabs(m->F[50]) *
-            1.4210854715202004e-14 + fabs(m->F[51]) * 1.4210854715202004e-14;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[52]) * 0.00390625 + fabs(m->F[53]) * 0.0009765625 + fabs(m->F[54]) * 4.0 +
-            fabs(m->F[55]) * 16.0 + fabs(m->F[56]) * 0.0078125 + fabs(m->F[57]) * 512.0 +
-            fabs(m->F[58]) * 2.2737367544323206e-13 + fabs(m->F[59]) * 2.2737367544323206e-13 +
-            fabs(m->F[60]) * 2.2737367544323206e-13;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[61]) * 2048.0 + fabs(m->F[62]) * 65536.0;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[63]) * 1.4551915228366852e-11 + fabs(m->F[64]) * 2.842170943040401e-14 +
-            fabs(m->F[65]) * 1.862645149230957e-09;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[66]) * 0.001953125;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[67]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[68]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[69]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[70]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[71]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[72]);
+    enu_doppler18_twin_scalar norm = 0.0;
+    lane_pair lanes;
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[10]), fabs(m->F[21])), lane_pair_of(4.0, 0.5));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[11]), fabs(m->F[22])),
+            lane_pair_of(8.0, 0.125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[12]), fabs(m->F[23])),
+            lane_pair_of(4096.0, 512.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[13]), fabs(m->F[24])),
+            lane_pair_of(8.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[14]), fabs(m->F[25])),
+            lane_pair_of(524288.0, 65536.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[15]), fabs(m->F[26])),
+            lane_pair_of(2.3283064365386963e-10, 2.9103830456733704e-11));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[16]), fabs(m->F[27])),
+            lane_pair_of(2.3283064365386963e-10, 2.9103830456733704e-11));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[17]), fabs(m->F[28])),
+            lane_pair_of(2.3283064365386963e-10, 2.9103830456733704e-11));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[18]), fabs(m->F[29])),
+            lane_pair_of(2.3283064365386963e-10, 2.9103830456733704e-11));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[19]), fabs(m->F[30])),
+            lane_pair_of(2.3283064365386963e-10, 2.9103830456733704e-11));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[20]), fabs(m->F[31])),
+            lane_pair_of(2.3283064365386963e-10, 2.9103830456733704e-11));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[0]), fabs(m->F[32])), lane_pair_of(0.25,
+            0.000244140625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[1]), fabs(m->F[33])),
+            lane_pair_of(2.0, 0.001953125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[2]), fabs(m->F[34])),
+            lane_pair_of(4096.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[3]), fabs(m->F[35])),
+            lane_pair_of(131072.0, 4.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[4]), fabs(m->F[36])),
+            lane_pair_of(5.820766091346741e-11, 0.25));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[5]), fabs(m->F[37])),
+            lane_pair_of(5.820766091346741e-11, 0.001953125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[6]), fabs(m->F[38])),
+            lane_pair_of(5.820766091346741e-11, 128.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[7]), fabs(m->F[39])),
+            lane_pair_of(5.820766091346741e-11, 5.684341886080802e-14));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[8]), fabs(m->F[40])),
+            lane_pair_of(5.820766091346741e-11, 5.684341886080802e-14));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[9]), fabs(m->F[41])),
+            lane_pair_of(5.820766091346741e-11, 5.684341886080802e-14));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[42]), fabs(m->F[52])),
+            lane_pair_of(0.000244140625, 0.00390625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[43]), fabs(m->F[53])),
+            lane_pair_of(0.00048828125, 0.0009765625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[44]), fabs(m->F[54])),
+            lane_pair_of(0.25, 4.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[45]), fabs(m->F[55])),
+            lane_pair_of(1.0, 16.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[46]), fabs(m->F[56])),
+            lane_pair_of(0.0625, 0.0078125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[47]), fabs(m->F[57])),
+            lane_pair_of(0.00048828125, 512.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[48]), fabs(m->F[58])),
+            lane_pair_of(32.0, 2.2737367544323206e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[49]), fabs(m->F[59])),
+            lane_pair_of(1.4210854715202004e-14, 2.2737367544323206e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[50]), fabs(m->F[60])),
+            lane_pair_of(1.4210854715202004e-14, 2.2737367544323206e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[51]), 0.0),
+            lane_pair_of(1.4210854715202004e-14, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[63]), fabs(m->F[61])),
+            lane_pair_of(1.4551915228366852e-11, 2048.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[64]), fabs(m->F[62])),
+            lane_pair_of(2.842170943040401e-14, 65536.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[65]), 0.0),
+            lane_pair_of(1.862645149230957e-09, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[66]), fabs(m->F[67])),
+            lane_pair_of(0.001953125, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[68]), fabs(m->F[69]));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[70]), fabs(m->F[71]));
+    norm = lane_pair_max(lanes, norm);
+    const enu_doppler18_twin_scalar v = fabs(m->F[72]);
     norm = v > norm ? v : norm;
     return norm;
 }
@@ -492,9 +522,12 @@ static enu_doppler18_twin_scalar balanced_norm(const enu_doppler18_twin_matrices
            balancing
    in powers of two, starting from the fixed D (at the check operating point one sweep finds it a
            fixed
-   point) and stopped at a fixed point; the sums in the reference's order (row by row). */
-static enu_doppler18_twin_scalar rebalanced_norm(const enu_doppler18_twin_matrices *restrict m,
-        enu_doppler18_twin_discretize_scratch *restrict w)
+   point) and stopped at a fixed point; the sums in the reference's order (row by row).
+   Not inlined: it runs only when a doubling is at stake, and inlined, gcc -O2 would keep
+   balanced_norm's |F_ij| on the stack for it on every call (bench/bench_cycle.py: 130
+   instructions at 18 states). */
+ENU_DOPPLER18_TWIN_BLOCK enu_doppler18_twin_scalar rebalanced_norm(const enu_doppler18_twin_matrices
+        *restrict m, enu_doppler18_twin_discretize_scratch *restrict w)
 {
     enu_doppler18_twin_scalar v, norm = 0.0;
     signed char exponent[ENU_DOPPLER18_TWIN_N_STATES]; /* within [-40, 40] */

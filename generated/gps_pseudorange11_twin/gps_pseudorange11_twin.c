@@ -360,30 +360,43 @@ static const signed char balance_exponent[GPS_PSEUDORANGE11_TWIN_N_STATES] = { 1
 static gps_pseudorange11_twin_scalar balanced_norm(const gps_pseudorange11_twin_matrices *restrict
         m)
 {
-    gps_pseudorange11_twin_scalar v, norm = 0.0;
-    v = fabs(m->F[0]) * 2.0 + fabs(m->F[1]) * 0.015625 + fabs(m->F[2]) * 0.00048828125;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[3]) * 0.5 + fabs(m->F[4]) * 0.0078125 + fabs(m->F[5]) * 0.00048828125;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[6]) * 64.0 + fabs(m->F[7]) * 128.0 + fabs(m->F[8]) * 0.015625;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[9]) * 2048.0 + fabs(m->F[10]) * 2.0 + fabs(m->F[11]) * 0.5 + fabs(m->F[12]) *
-            1.52587890625e-05 + fabs(m->F[13]) * 3.0517578125e-05;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[14]) * 2048.0 + fabs(m->F[15]) * 0.5 + fabs(m->F[16]) * 0.25 + fabs(m->F[17]) *
-            7.62939453125e-06 + fabs(m->F[18]) * 1.52587890625e-05;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[19]) * 64.0 + fabs(m->F[20]) * 2.0 + fabs(m->F[21]) * 4.0 + fabs(m->F[22]) *
-            3.0517578125e-05 + fabs(m->F[23]) * 3.0517578125e-05;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[24]) + fabs(m->F[25]) * 2.0;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[26]) + fabs(m->F[27]) * 2.0;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[28]) * 0.5 + fabs(m->F[29]) * 0.5;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[30]) * 8.271806125530277e-25;
-    norm = v > norm ? v : norm;
+    gps_pseudorange11_twin_scalar norm = 0.0;
+    lane_pair lanes;
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[9]), fabs(m->F[14])), lane_pair_of(2048.0,
+            2048.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[10]), fabs(m->F[15])),
+            lane_pair_of(2.0, 0.5));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[11]), fabs(m->F[16])),
+            lane_pair_of(0.5, 0.25));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[12]), fabs(m->F[17])),
+            lane_pair_of(1.52587890625e-05, 7.62939453125e-06));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[13]), fabs(m->F[18])),
+            lane_pair_of(3.0517578125e-05, 1.52587890625e-05));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[19]), fabs(m->F[0])), lane_pair_of(64.0, 2.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[20]), fabs(m->F[1])),
+            lane_pair_of(2.0, 0.015625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[21]), fabs(m->F[2])),
+            lane_pair_of(4.0, 0.00048828125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[22]), 0.0),
+            lane_pair_of(3.0517578125e-05, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[23]), 0.0),
+            lane_pair_of(3.0517578125e-05, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[3]), fabs(m->F[6])), lane_pair_of(0.5, 64.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[4]), fabs(m->F[7])),
+            lane_pair_of(0.0078125, 128.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[5]), fabs(m->F[8])),
+            lane_pair_of(0.00048828125, 0.015625));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[24]), fabs(m->F[26]));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[25]), fabs(m->F[27])),
+            lane_pair_of(2.0, 2.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[28]), fabs(m->F[30])), lane_pair_of(0.5,
+            8.271806125530277e-25));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[29]), 0.0), lane_pair_of(0.5, 1.0));
+    norm = lane_pair_max(lanes, norm);
     return norm;
 }
 
@@ -393,9 +406,13 @@ static gps_pseudorange11_twin_scalar balanced_norm(const gps_pseudorange11_twin_
            balancing
    in powers of two, starting from the fixed D (at the check operating point one sweep finds it a
            fixed
-   point) and stopped at a fixed point; the sums in the reference's order (row by row). */
-static gps_pseudorange11_twin_scalar rebalanced_norm(const gps_pseudorange11_twin_matrices *restrict
-        m, gps_pseudorange11_twin_discretize_scratch *restrict w)
+   point) and stopped at a fixed point; the sums in the reference's order (row by row).
+   Not inlined: it runs only when a doubling is at stake, and inlined, gcc -O2 would keep
+   balanced_norm's |F_ij| on the stack for it on every call (bench/bench_cycle.py: 130
+   instructions at 18 states). */
+GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar rebalanced_norm(const
+        gps_pseudorange11_twin_matrices *restrict m, gps_pseudorange11_twin_discretize_scratch
+        *restrict w)
 {
     gps_pseudorange11_twin_scalar v, norm = 0.0;
     signed char exponent[GPS_PSEUDORANGE11_TWIN_N_STATES]; /* within [-40, 40] */

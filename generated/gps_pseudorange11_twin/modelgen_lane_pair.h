@@ -74,6 +74,16 @@ static inline double lane_pair_sum(const lane_pair acc)
     return lanes[0] + lanes[1];
 }
 
+/* the larger of norm and each lane, the first lane first (norm = v > norm ? v : norm, lane by
+   lane) */
+static inline double lane_pair_max(const lane_pair acc, double norm)
+{
+    double lanes[2];
+    memcpy(lanes, &acc, sizeof lanes);
+    norm = lanes[0] > norm ? lanes[0] : norm;
+    return lanes[1] > norm ? lanes[1] : norm;
+}
+
 static inline void lane_pair_store(double *a, const lane_pair acc) /* a[0], a[1] */
 {
     memcpy(a, &acc, sizeof acc);
@@ -138,6 +148,12 @@ static inline lane_pair lane_pair_add(const lane_pair acc, const lane_pair a)
 static inline MODELGEN_SCALAR lane_pair_sum(const lane_pair acc)
 {
     return acc.lane[0] + acc.lane[1];
+}
+
+static inline MODELGEN_SCALAR lane_pair_max(const lane_pair acc, MODELGEN_SCALAR norm)
+{
+    norm = acc.lane[0] > norm ? acc.lane[0] : norm;
+    return acc.lane[1] > norm ? acc.lane[1] : norm;
 }
 
 static inline void lane_pair_store(MODELGEN_SCALAR *a, const lane_pair acc) /* a[0], a[1] */

@@ -580,69 +580,93 @@ static const signed char balance_exponent[INS_GNSS21_N_STATES] = { 15, 15, 10, 3
    power of two.  A plan on it that needs a doubling is retaken on rebalanced_norm. */
 static ins_gnss21_scalar balanced_norm(const ins_gnss21_matrices *restrict m)
 {
-    ins_gnss21_scalar v, norm = 0.0;
-    v = fabs(m->F[0]) + fabs(m->F[1]) * 0.03125 + fabs(m->F[2]) * 0.000244140625;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[3]) + fabs(m->F[4]) * 0.03125 + fabs(m->F[5]) * 0.000244140625;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[6]) * 32.0 + fabs(m->F[7]) * 32.0 + fabs(m->F[8]) * 0.001953125;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[9]) + fabs(m->F[10]) * 0.25 + fabs(m->F[11]) * 0.0001220703125 + fabs(m->F[12]) *
-            0.00048828125 + fabs(m->F[13]) * 1.1368683772161603e-13 + fabs(m->F[14]) *
-            1.1368683772161603e-13 + fabs(m->F[15]) * 1.1368683772161603e-13 + fabs(m->F[16]) *
-            1.1368683772161603e-13 + fabs(m->F[17]) * 1.1368683772161603e-13 + fabs(m->F[18]) *
-            1.1368683772161603e-13;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[19]) + fabs(m->F[20]) * 0.25 + fabs(m->F[21]) * 0.0001220703125 + fabs(m->F[22]) *
-            0.00048828125 + fabs(m->F[23]) * 1.1368683772161603e-13 + fabs(m->F[24]) *
-            1.1368683772161603e-13 + fabs(m->F[25]) * 1.1368683772161603e-13 + fabs(m->F[26]) *
-            1.1368683772161603e-13 + fabs(m->F[27]) * 1.1368683772161603e-13 + fabs(m->F[28]) *
-            1.1368683772161603e-13;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[29]) * 512.0 + fabs(m->F[30]) * 4.0 + fabs(m->F[31]) * 4.0 + fabs(m->F[32]) *
-            0.00048828125 + fabs(m->F[33]) * 0.00048828125 + fabs(m->F[34]) * 4.547473508864641e-13
-            + fabs(m->F[35]) * 4.547473508864641e-13 + fabs(m->F[36]) * 4.547473508864641e-13 +
-            fabs(m->F[37]) * 4.547473508864641e-13 + fabs(m->F[38]) * 4.547473508864641e-13 +
-            fabs(m->F[39]) * 4.547473508864641e-13;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[40]) * 8192.0 + fabs(m->F[41]) + fabs(m->F[42]) * 4.0 + fabs(m->F[43]) *
-            9.313225746154785e-10 + fabs(m->F[44]) * 9.313225746154785e-10 + fabs(m->F[45]) *
-            9.313225746154785e-10 + fabs(m->F[46]) * 9.313225746154785e-10 + fabs(m->F[47]) *
-            9.313225746154785e-10 + fabs(m->F[48]) * 9.313225746154785e-10;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[49]) * 8192.0 + fabs(m->F[50]) + fabs(m->F[51]) * 4.0 + fabs(m->F[52]) *
-            9.313225746154785e-10 + fabs(m->F[53]) * 9.313225746154785e-10 + fabs(m->F[54]) *
-            9.313225746154785e-10 + fabs(m->F[55]) * 9.313225746154785e-10 + fabs(m->F[56]) *
-            9.313225746154785e-10 + fabs(m->F[57]) * 9.313225746154785e-10;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[58]) * 2048.0 + fabs(m->F[59]) * 0.25 + fabs(m->F[60]) * 0.25 + fabs(m->F[61]) *
-            2.3283064365386963e-10 + fabs(m->F[62]) * 2.3283064365386963e-10 + fabs(m->F[63]) *
-            2.3283064365386963e-10 + fabs(m->F[64]) * 2.3283064365386963e-10 + fabs(m->F[65]) *
-            2.3283064365386963e-10 + fabs(m->F[66]) * 2.3283064365386963e-10;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[67]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[68]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[69]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[70]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[71]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[72]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[73]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[74]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[75]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[76]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[77]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[78]);
+    ins_gnss21_scalar norm = 0.0;
+    lane_pair lanes;
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[29]), fabs(m->F[9])), lane_pair_of(512.0,
+            1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[30]), fabs(m->F[10])),
+            lane_pair_of(4.0, 0.25));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[31]), fabs(m->F[11])),
+            lane_pair_of(4.0, 0.0001220703125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[32]), fabs(m->F[12])),
+            lane_pair_of(0.00048828125, 0.00048828125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[33]), fabs(m->F[13])),
+            lane_pair_of(0.00048828125, 1.1368683772161603e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[34]), fabs(m->F[14])),
+            lane_pair_of(4.547473508864641e-13, 1.1368683772161603e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[35]), fabs(m->F[15])),
+            lane_pair_of(4.547473508864641e-13, 1.1368683772161603e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[36]), fabs(m->F[16])),
+            lane_pair_of(4.547473508864641e-13, 1.1368683772161603e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[37]), fabs(m->F[17])),
+            lane_pair_of(4.547473508864641e-13, 1.1368683772161603e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[38]), fabs(m->F[18])),
+            lane_pair_of(4.547473508864641e-13, 1.1368683772161603e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[39]), 0.0),
+            lane_pair_of(4.547473508864641e-13, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[19]), fabs(m->F[40])), lane_pair_of(1.0,
+            8192.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[20]), fabs(m->F[41])),
+            lane_pair_of(0.25, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[21]), fabs(m->F[42])),
+            lane_pair_of(0.0001220703125, 4.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[22]), fabs(m->F[43])),
+            lane_pair_of(0.00048828125, 9.313225746154785e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[23]), fabs(m->F[44])),
+            lane_pair_of(1.1368683772161603e-13, 9.313225746154785e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[24]), fabs(m->F[45])),
+            lane_pair_of(1.1368683772161603e-13, 9.313225746154785e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[25]), fabs(m->F[46])),
+            lane_pair_of(1.1368683772161603e-13, 9.313225746154785e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[26]), fabs(m->F[47])),
+            lane_pair_of(1.1368683772161603e-13, 9.313225746154785e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[27]), fabs(m->F[48])),
+            lane_pair_of(1.1368683772161603e-13, 9.313225746154785e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[28]), 0.0),
+            lane_pair_of(1.1368683772161603e-13, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[49]), fabs(m->F[58])), lane_pair_of(8192.0,
+            2048.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[50]), fabs(m->F[59])),
+            lane_pair_of(1.0, 0.25));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[51]), fabs(m->F[60])),
+            lane_pair_of(4.0, 0.25));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[52]), fabs(m->F[61])),
+            lane_pair_of(9.313225746154785e-10, 2.3283064365386963e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[53]), fabs(m->F[62])),
+            lane_pair_of(9.313225746154785e-10, 2.3283064365386963e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[54]), fabs(m->F[63])),
+            lane_pair_of(9.313225746154785e-10, 2.3283064365386963e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[55]), fabs(m->F[64])),
+            lane_pair_of(9.313225746154785e-10, 2.3283064365386963e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[56]), fabs(m->F[65])),
+            lane_pair_of(9.313225746154785e-10, 2.3283064365386963e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[57]), fabs(m->F[66])),
+            lane_pair_of(9.313225746154785e-10, 2.3283064365386963e-10));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[0]), fabs(m->F[3]));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[1]), fabs(m->F[4])),
+            lane_pair_of(0.03125, 0.03125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[2]), fabs(m->F[5])),
+            lane_pair_of(0.000244140625, 0.000244140625));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[6]), fabs(m->F[67])), lane_pair_of(32.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[7]), 0.0), lane_pair_of(32.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[8]), 0.0), lane_pair_of(0.001953125,
+            1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[68]), fabs(m->F[69]));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[70]), fabs(m->F[71]));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[72]), fabs(m->F[73]));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[74]), fabs(m->F[75]));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[76]), fabs(m->F[77]));
+    norm = lane_pair_max(lanes, norm);
+    const ins_gnss21_scalar v = fabs(m->F[78]);
     norm = v > norm ? v : norm;
     return norm;
 }
@@ -653,8 +677,11 @@ static ins_gnss21_scalar balanced_norm(const ins_gnss21_matrices *restrict m)
            balancing
    in powers of two, starting from the fixed D (at the check operating point one sweep finds it a
            fixed
-   point) and stopped at a fixed point; the sums in the reference's order (row by row). */
-static ins_gnss21_scalar rebalanced_norm(const ins_gnss21_matrices *restrict m,
+   point) and stopped at a fixed point; the sums in the reference's order (row by row).
+   Not inlined: it runs only when a doubling is at stake, and inlined, gcc -O2 would keep
+   balanced_norm's |F_ij| on the stack for it on every call (bench/bench_cycle.py: 130
+   instructions at 18 states). */
+INS_GNSS21_BLOCK ins_gnss21_scalar rebalanced_norm(const ins_gnss21_matrices *restrict m,
         ins_gnss21_discretize_scratch *restrict w)
 {
     ins_gnss21_scalar v, norm = 0.0;

@@ -627,73 +627,106 @@ static const signed char balance_exponent[INS_GNSS21_NAV_N_STATES] = { 16, 40, 1
    power of two.  A plan on it that needs a doubling is retaken on rebalanced_norm. */
 static ins_gnss21_nav_scalar balanced_norm(const ins_gnss21_nav_matrices *restrict m)
 {
-    ins_gnss21_nav_scalar v, norm = 0.0;
-    v = fabs(m->F[0]) + fabs(m->F[1]) * 0.015625 + fabs(m->F[2]) * 0.000244140625;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[3]) * 5.960464477539063e-08 + fabs(m->F[4]) + fabs(m->F[5]) *
-            9.313225746154785e-10 + fabs(m->F[6]) * 7.275957614183426e-12;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[7]) * 0.001953125;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[8]) * 4096.0 + fabs(m->F[9]) * 64.0 + fabs(m->F[10]) + fabs(m->F[11]) * 0.5 +
-            fabs(m->F[12]) * 0.125 + fabs(m->F[13]) * 0.0001220703125 + fabs(m->F[14]) *
-            0.00048828125 + fabs(m->F[15]) * 5.684341886080802e-14 + fabs(m->F[16]) *
-            5.684341886080802e-14 + fabs(m->F[17]) * 5.684341886080802e-14 + fabs(m->F[18]) *
-            5.684341886080802e-14 + fabs(m->F[19]) * 5.684341886080802e-14 + fabs(m->F[20]) *
-            5.684341886080802e-14;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[21]) * 8192.0 + fabs(m->F[22]) * 128.0 + fabs(m->F[23]) * 2.0 + fabs(m->F[24]) +
-            fabs(m->F[25]) * 0.25 + fabs(m->F[26]) * 0.000244140625 + fabs(m->F[27]) * 0.0009765625
-            + fabs(m->F[28]) * 1.1368683772161603e-13 + fabs(m->F[29]) * 1.1368683772161603e-13 +
-            fabs(m->F[30]) * 1.1368683772161603e-13 + fabs(m->F[31]) * 1.1368683772161603e-13 +
-            fabs(m->F[32]) * 1.1368683772161603e-13 + fabs(m->F[33]) * 1.1368683772161603e-13;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[34]) * 32768.0 + fabs(m->F[35]) * 512.0 + fabs(m->F[36]) * 8.0 + fabs(m->F[37]) *
-            4.0 + fabs(m->F[38]) * 0.0009765625 + fabs(m->F[39]) * 0.0009765625 + fabs(m->F[40]) *
-            4.547473508864641e-13 + fabs(m->F[41]) * 4.547473508864641e-13 + fabs(m->F[42]) *
-            4.547473508864641e-13 + fabs(m->F[43]) * 4.547473508864641e-13 + fabs(m->F[44]) *
-            4.547473508864641e-13 + fabs(m->F[45]) * 4.547473508864641e-13;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[46]) * 33554432.0 + fabs(m->F[47]) * 524288.0 + fabs(m->F[48]) * 4096.0 +
-            fabs(m->F[49]) + fabs(m->F[50]) * 4.0 + fabs(m->F[51]) * 4.656612873077393e-10 +
-            fabs(m->F[52]) * 4.656612873077393e-10 + fabs(m->F[53]) * 4.656612873077393e-10 +
-            fabs(m->F[54]) * 4.656612873077393e-10 + fabs(m->F[55]) * 4.656612873077393e-10 +
-            fabs(m->F[56]) * 4.656612873077393e-10;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[57]) * 524288.0 + fabs(m->F[58]) * 8192.0 + fabs(m->F[59]) + fabs(m->F[60]) * 4.0
-            + fabs(m->F[61]) * 4.656612873077393e-10 + fabs(m->F[62]) * 4.656612873077393e-10 +
-            fabs(m->F[63]) * 4.656612873077393e-10 + fabs(m->F[64]) * 4.656612873077393e-10 +
-            fabs(m->F[65]) * 4.656612873077393e-10 + fabs(m->F[66]) * 4.656612873077393e-10;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[67]) * 8388608.0 + fabs(m->F[68]) * 131072.0 + fabs(m->F[69]) * 1024.0 +
-            fabs(m->F[70]) * 0.25 + fabs(m->F[71]) * 0.25 + fabs(m->F[72]) * 1.1641532182693481e-10
-            + fabs(m->F[73]) * 1.1641532182693481e-10 + fabs(m->F[74]) * 1.1641532182693481e-10 +
-            fabs(m->F[75]) * 1.1641532182693481e-10 + fabs(m->F[76]) * 1.1641532182693481e-10 +
-            fabs(m->F[77]) * 1.1641532182693481e-10;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[78]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[79]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[80]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[81]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[82]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[83]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[84]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[85]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[86]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[87]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[88]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[89]);
+    ins_gnss21_nav_scalar norm = 0.0;
+    lane_pair lanes;
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[8]), fabs(m->F[21])), lane_pair_of(4096.0,
+            8192.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[9]), fabs(m->F[22])),
+            lane_pair_of(64.0, 128.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[10]), fabs(m->F[23])),
+            lane_pair_of(1.0, 2.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[11]), fabs(m->F[24])),
+            lane_pair_of(0.5, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[12]), fabs(m->F[25])),
+            lane_pair_of(0.125, 0.25));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[13]), fabs(m->F[26])),
+            lane_pair_of(0.0001220703125, 0.000244140625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[14]), fabs(m->F[27])),
+            lane_pair_of(0.00048828125, 0.0009765625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[15]), fabs(m->F[28])),
+            lane_pair_of(5.684341886080802e-14, 1.1368683772161603e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[16]), fabs(m->F[29])),
+            lane_pair_of(5.684341886080802e-14, 1.1368683772161603e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[17]), fabs(m->F[30])),
+            lane_pair_of(5.684341886080802e-14, 1.1368683772161603e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[18]), fabs(m->F[31])),
+            lane_pair_of(5.684341886080802e-14, 1.1368683772161603e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[19]), fabs(m->F[32])),
+            lane_pair_of(5.684341886080802e-14, 1.1368683772161603e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[20]), fabs(m->F[33])),
+            lane_pair_of(5.684341886080802e-14, 1.1368683772161603e-13));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[34]), fabs(m->F[46])), lane_pair_of(32768.0,
+            33554432.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[35]), fabs(m->F[47])),
+            lane_pair_of(512.0, 524288.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[36]), fabs(m->F[48])),
+            lane_pair_of(8.0, 4096.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[37]), fabs(m->F[49])),
+            lane_pair_of(4.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[38]), fabs(m->F[50])),
+            lane_pair_of(0.0009765625, 4.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[39]), fabs(m->F[51])),
+            lane_pair_of(0.0009765625, 4.656612873077393e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[40]), fabs(m->F[52])),
+            lane_pair_of(4.547473508864641e-13, 4.656612873077393e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[41]), fabs(m->F[53])),
+            lane_pair_of(4.547473508864641e-13, 4.656612873077393e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[42]), fabs(m->F[54])),
+            lane_pair_of(4.547473508864641e-13, 4.656612873077393e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[43]), fabs(m->F[55])),
+            lane_pair_of(4.547473508864641e-13, 4.656612873077393e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[44]), fabs(m->F[56])),
+            lane_pair_of(4.547473508864641e-13, 4.656612873077393e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[45]), 0.0),
+            lane_pair_of(4.547473508864641e-13, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[67]), fabs(m->F[57])), lane_pair_of(8388608.0,
+            524288.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[68]), fabs(m->F[58])),
+            lane_pair_of(131072.0, 8192.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[69]), fabs(m->F[59])),
+            lane_pair_of(1024.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[70]), fabs(m->F[60])),
+            lane_pair_of(0.25, 4.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[71]), fabs(m->F[61])),
+            lane_pair_of(0.25, 4.656612873077393e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[72]), fabs(m->F[62])),
+            lane_pair_of(1.1641532182693481e-10, 4.656612873077393e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[73]), fabs(m->F[63])),
+            lane_pair_of(1.1641532182693481e-10, 4.656612873077393e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[74]), fabs(m->F[64])),
+            lane_pair_of(1.1641532182693481e-10, 4.656612873077393e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[75]), fabs(m->F[65])),
+            lane_pair_of(1.1641532182693481e-10, 4.656612873077393e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[76]), fabs(m->F[66])),
+            lane_pair_of(1.1641532182693481e-10, 4.656612873077393e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[77]), 0.0),
+            lane_pair_of(1.1641532182693481e-10, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[3]), fabs(m->F[0])),
+            lane_pair_of(5.960464477539063e-08, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[4]), fabs(m->F[1])),
+            lane_pair_of(1.0, 0.015625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[5]), fabs(m->F[2])),
+            lane_pair_of(9.313225746154785e-10, 0.000244140625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[6]), 0.0),
+            lane_pair_of(7.275957614183426e-12, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[7]), fabs(m->F[78])), lane_pair_of(0.001953125,
+            1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[79]), fabs(m->F[80]));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[81]), fabs(m->F[82]));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[83]), fabs(m->F[84]));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[85]), fabs(m->F[86]));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[87]), fabs(m->F[88]));
+    norm = lane_pair_max(lanes, norm);
+    const ins_gnss21_nav_scalar v = fabs(m->F[89]);
     norm = v > norm ? v : norm;
     return norm;
 }
@@ -704,9 +737,12 @@ static ins_gnss21_nav_scalar balanced_norm(const ins_gnss21_nav_matrices *restri
            balancing
    in powers of two, starting from the fixed D (at the check operating point one sweep finds it a
            fixed
-   point) and stopped at a fixed point; the sums in the reference's order (row by row). */
-static ins_gnss21_nav_scalar rebalanced_norm(const ins_gnss21_nav_matrices *restrict m,
-        ins_gnss21_nav_discretize_scratch *restrict w)
+   point) and stopped at a fixed point; the sums in the reference's order (row by row).
+   Not inlined: it runs only when a doubling is at stake, and inlined, gcc -O2 would keep
+   balanced_norm's |F_ij| on the stack for it on every call (bench/bench_cycle.py: 130
+   instructions at 18 states). */
+INS_GNSS21_NAV_BLOCK ins_gnss21_nav_scalar rebalanced_norm(const ins_gnss21_nav_matrices *restrict
+        m, ins_gnss21_nav_discretize_scratch *restrict w)
 {
     ins_gnss21_nav_scalar v, norm = 0.0;
     signed char exponent[INS_GNSS21_NAV_N_STATES]; /* within [-40, 40] */

@@ -415,40 +415,72 @@ static const signed char balance_exponent[INS_GPS15_TWIN_N_STATES] = { -6, -8, -
    power of two.  A plan on it that needs a doubling is retaken on rebalanced_norm. */
 static ins_gps15_twin_scalar balanced_norm(const ins_gps15_twin_matrices *restrict m)
 {
-    ins_gps15_twin_scalar v, norm = 0.0;
-    v = fabs(m->F[0]) * 0.25 + fabs(m->F[1]) * 2.0 + fabs(m->F[2]) * 4096.0 + fabs(m->F[3]) *
-            65536.0 + fabs(m->F[4]) * 5.820766091346741e-11 + fabs(m->F[5]) * 5.820766091346741e-11
-            + fabs(m->F[6]) * 5.820766091346741e-11;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[7]) * 4.0 + fabs(m->F[8]) * 8.0 + fabs(m->F[9]) * 4096.0 + fabs(m->F[10]) * 8.0 +
-            fabs(m->F[11]) * 262144.0 + fabs(m->F[12]) * 2.3283064365386963e-10 + fabs(m->F[13]) *
-            2.3283064365386963e-10 + fabs(m->F[14]) * 2.3283064365386963e-10;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[15]) * 0.5 + fabs(m->F[16]) * 0.125 + fabs(m->F[17]) * 512.0 + fabs(m->F[18]) +
-            fabs(m->F[19]) * 32768.0 + fabs(m->F[20]) * 2.9103830456733704e-11 + fabs(m->F[21]) *
-            2.9103830456733704e-11 + fabs(m->F[22]) * 2.9103830456733704e-11;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[23]) * 0.000244140625 + fabs(m->F[24]) * 0.001953125 + fabs(m->F[25]) +
-            fabs(m->F[26]) * 4.0 + fabs(m->F[27]) * 0.25 + fabs(m->F[28]) * 0.001953125 +
-            fabs(m->F[29]) * 64.0 + fabs(m->F[30]) * 5.684341886080802e-14 + fabs(m->F[31]) *
-            5.684341886080802e-14 + fabs(m->F[32]) * 5.684341886080802e-14;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[33]) * 0.000244140625 + fabs(m->F[34]) * 0.00048828125 + fabs(m->F[35]) * 0.25 +
-            fabs(m->F[36]) + fabs(m->F[37]) * 0.0625 + fabs(m->F[38]) * 0.00048828125 +
-            fabs(m->F[39]) * 16.0 + fabs(m->F[40]) * 1.4210854715202004e-14 + fabs(m->F[41]) *
-            1.4210854715202004e-14 + fabs(m->F[42]) * 1.4210854715202004e-14;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[43]) * 0.00390625 + fabs(m->F[44]) * 0.0009765625 + fabs(m->F[45]) * 4.0 +
-            fabs(m->F[46]) * 16.0 + fabs(m->F[47]) * 0.0078125 + fabs(m->F[48]) * 256.0 +
-            fabs(m->F[49]) * 2.2737367544323206e-13 + fabs(m->F[50]) * 2.2737367544323206e-13 +
-            fabs(m->F[51]) * 2.2737367544323206e-13;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[52]) * 2048.0 + fabs(m->F[53]) * 32768.0;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[54]) * 1.4551915228366852e-11 + fabs(m->F[55]) * 2.842170943040401e-14 +
-            fabs(m->F[56]) * 9.313225746154785e-10;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[57]) * 0.00390625;
+    ins_gps15_twin_scalar norm = 0.0;
+    lane_pair lanes;
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[23]), fabs(m->F[33])),
+            lane_pair_of(0.000244140625, 0.000244140625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[24]), fabs(m->F[34])),
+            lane_pair_of(0.001953125, 0.00048828125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[25]), fabs(m->F[35])),
+            lane_pair_of(1.0, 0.25));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[26]), fabs(m->F[36])),
+            lane_pair_of(4.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[27]), fabs(m->F[37])),
+            lane_pair_of(0.25, 0.0625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[28]), fabs(m->F[38])),
+            lane_pair_of(0.001953125, 0.00048828125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[29]), fabs(m->F[39])),
+            lane_pair_of(64.0, 16.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[30]), fabs(m->F[40])),
+            lane_pair_of(5.684341886080802e-14, 1.4210854715202004e-14));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[31]), fabs(m->F[41])),
+            lane_pair_of(5.684341886080802e-14, 1.4210854715202004e-14));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[32]), fabs(m->F[42])),
+            lane_pair_of(5.684341886080802e-14, 1.4210854715202004e-14));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[43]), fabs(m->F[7])), lane_pair_of(0.00390625,
+            4.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[44]), fabs(m->F[8])),
+            lane_pair_of(0.0009765625, 8.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[45]), fabs(m->F[9])),
+            lane_pair_of(4.0, 4096.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[46]), fabs(m->F[10])),
+            lane_pair_of(16.0, 8.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[47]), fabs(m->F[11])),
+            lane_pair_of(0.0078125, 262144.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[48]), fabs(m->F[12])),
+            lane_pair_of(256.0, 2.3283064365386963e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[49]), fabs(m->F[13])),
+            lane_pair_of(2.2737367544323206e-13, 2.3283064365386963e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[50]), fabs(m->F[14])),
+            lane_pair_of(2.2737367544323206e-13, 2.3283064365386963e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[51]), 0.0),
+            lane_pair_of(2.2737367544323206e-13, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[15]), fabs(m->F[0])), lane_pair_of(0.5, 0.25));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[16]), fabs(m->F[1])),
+            lane_pair_of(0.125, 2.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[17]), fabs(m->F[2])),
+            lane_pair_of(512.0, 4096.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[18]), fabs(m->F[3])),
+            lane_pair_of(1.0, 65536.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[19]), fabs(m->F[4])),
+            lane_pair_of(32768.0, 5.820766091346741e-11));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[20]), fabs(m->F[5])),
+            lane_pair_of(2.9103830456733704e-11, 5.820766091346741e-11));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[21]), fabs(m->F[6])),
+            lane_pair_of(2.9103830456733704e-11, 5.820766091346741e-11));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[22]), 0.0),
+            lane_pair_of(2.9103830456733704e-11, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[54]), fabs(m->F[52])),
+            lane_pair_of(1.4551915228366852e-11, 2048.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[55]), fabs(m->F[53])),
+            lane_pair_of(2.842170943040401e-14, 32768.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[56]), 0.0),
+            lane_pair_of(9.313225746154785e-10, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    const ins_gps15_twin_scalar v = fabs(m->F[57]) * 0.00390625;
     norm = v > norm ? v : norm;
     return norm;
 }
@@ -459,9 +491,12 @@ static ins_gps15_twin_scalar balanced_norm(const ins_gps15_twin_matrices *restri
            balancing
    in powers of two, starting from the fixed D (at the check operating point one sweep finds it a
            fixed
-   point) and stopped at a fixed point; the sums in the reference's order (row by row). */
-static ins_gps15_twin_scalar rebalanced_norm(const ins_gps15_twin_matrices *restrict m,
-        ins_gps15_twin_discretize_scratch *restrict w)
+   point) and stopped at a fixed point; the sums in the reference's order (row by row).
+   Not inlined: it runs only when a doubling is at stake, and inlined, gcc -O2 would keep
+   balanced_norm's |F_ij| on the stack for it on every call (bench/bench_cycle.py: 130
+   instructions at 18 states). */
+INS_GPS15_TWIN_BLOCK ins_gps15_twin_scalar rebalanced_norm(const ins_gps15_twin_matrices *restrict
+        m, ins_gps15_twin_discretize_scratch *restrict w)
 {
     ins_gps15_twin_scalar v, norm = 0.0;
     signed char exponent[INS_GPS15_TWIN_N_STATES]; /* within [-40, 40] */

@@ -355,32 +355,53 @@ static const signed char balance_exponent[NED_DOPPLER13_REDUCED_N_STATES] = { -3
    power of two.  A plan on it that needs a doubling is retaken on rebalanced_norm. */
 static ned_doppler13_reduced_scalar balanced_norm(const ned_doppler13_reduced_matrices *restrict m)
 {
-    ned_doppler13_reduced_scalar v, norm = 0.0;
-    v = fabs(m->F[0]) * 2.0 + fabs(m->F[1]) * 2.0 + fabs(m->F[2]) * 16384.0 + fabs(m->F[3]) * 8.0 +
-            fabs(m->F[4]) * 7.275957614183426e-12 + fabs(m->F[5]) * 7.275957614183426e-12 +
-            fabs(m->F[6]) * 7.275957614183426e-12 + fabs(m->F[7]) * 7.275957614183426e-12;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[8]) * 0.5 + fabs(m->F[9]) + fabs(m->F[10]) * 2048.0 + fabs(m->F[11]) *
-            3.637978807091713e-12 + fabs(m->F[12]) * 3.637978807091713e-12 + fabs(m->F[13]) *
-            3.637978807091713e-12 + fabs(m->F[14]) * 3.637978807091713e-12;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[15]) * 0.5 + fabs(m->F[16]) + fabs(m->F[17]) * 8192.0 + fabs(m->F[18]) * 4.0 +
-            fabs(m->F[19]) * 3.637978807091713e-12 + fabs(m->F[20]) * 3.637978807091713e-12 +
-            fabs(m->F[21]) * 3.637978807091713e-12 + fabs(m->F[22]) * 3.637978807091713e-12;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[23]) * 0.00048828125 + fabs(m->F[24]) * 0.00048828125 + fabs(m->F[25]) +
-            fabs(m->F[26]) * 4.0 + fabs(m->F[27]) * 0.001953125;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[28]) * 6.103515625e-05 + fabs(m->F[29]) * 0.0001220703125 + fabs(m->F[30]) * 0.25
-            + fabs(m->F[31]) + fabs(m->F[32]) * 0.00048828125;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[33]) * 512.0;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[34]) * 1.862645149230957e-09 + fabs(m->F[35]) * 9.094947017729282e-13;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[36]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[37]);
+    ned_doppler13_reduced_scalar norm = 0.0;
+    lane_pair lanes;
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[0]), fabs(m->F[15])), lane_pair_of(2.0, 0.5));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[1]), fabs(m->F[16])),
+            lane_pair_of(2.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[2]), fabs(m->F[17])),
+            lane_pair_of(16384.0, 8192.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[3]), fabs(m->F[18])),
+            lane_pair_of(8.0, 4.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[4]), fabs(m->F[19])),
+            lane_pair_of(7.275957614183426e-12, 3.637978807091713e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[5]), fabs(m->F[20])),
+            lane_pair_of(7.275957614183426e-12, 3.637978807091713e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[6]), fabs(m->F[21])),
+            lane_pair_of(7.275957614183426e-12, 3.637978807091713e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[7]), fabs(m->F[22])),
+            lane_pair_of(7.275957614183426e-12, 3.637978807091713e-12));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[8]), fabs(m->F[23])), lane_pair_of(0.5,
+            0.00048828125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[9]), fabs(m->F[24])),
+            lane_pair_of(1.0, 0.00048828125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[10]), fabs(m->F[25])),
+            lane_pair_of(2048.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[11]), fabs(m->F[26])),
+            lane_pair_of(3.637978807091713e-12, 4.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[12]), fabs(m->F[27])),
+            lane_pair_of(3.637978807091713e-12, 0.001953125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[13]), 0.0),
+            lane_pair_of(3.637978807091713e-12, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[14]), 0.0),
+            lane_pair_of(3.637978807091713e-12, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[28]), fabs(m->F[34])),
+            lane_pair_of(6.103515625e-05, 1.862645149230957e-09));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[29]), fabs(m->F[35])),
+            lane_pair_of(0.0001220703125, 9.094947017729282e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[30]), 0.0), lane_pair_of(0.25,
+            1.0));
+    lanes = lane_pair_add(lanes, lane_pair_of(fabs(m->F[31]), 0.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[32]), 0.0),
+            lane_pair_of(0.00048828125, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[33]), fabs(m->F[36])), lane_pair_of(512.0,
+            1.0));
+    norm = lane_pair_max(lanes, norm);
+    const ned_doppler13_reduced_scalar v = fabs(m->F[37]);
     norm = v > norm ? v : norm;
     return norm;
 }
@@ -391,9 +412,13 @@ static ned_doppler13_reduced_scalar balanced_norm(const ned_doppler13_reduced_ma
            balancing
    in powers of two, starting from the fixed D (at the check operating point one sweep finds it a
            fixed
-   point) and stopped at a fixed point; the sums in the reference's order (row by row). */
-static ned_doppler13_reduced_scalar rebalanced_norm(const ned_doppler13_reduced_matrices *restrict
-        m, ned_doppler13_reduced_discretize_scratch *restrict w)
+   point) and stopped at a fixed point; the sums in the reference's order (row by row).
+   Not inlined: it runs only when a doubling is at stake, and inlined, gcc -O2 would keep
+   balanced_norm's |F_ij| on the stack for it on every call (bench/bench_cycle.py: 130
+   instructions at 18 states). */
+NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar rebalanced_norm(const
+        ned_doppler13_reduced_matrices *restrict m, ned_doppler13_reduced_discretize_scratch
+        *restrict w)
 {
     ned_doppler13_reduced_scalar v, norm = 0.0;
     signed char exponent[NED_DOPPLER13_REDUCED_N_STATES]; /* within [-40, 40] */

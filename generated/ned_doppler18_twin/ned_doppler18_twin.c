@@ -379,46 +379,70 @@ static const signed char balance_exponent[NED_DOPPLER18_TWIN_N_STATES] = { -2, -
    power of two.  A plan on it that needs a doubling is retaken on rebalanced_norm. */
 static ned_doppler18_twin_scalar balanced_norm(const ned_doppler18_twin_matrices *restrict m)
 {
-    ned_doppler18_twin_scalar v, norm = 0.0;
-    v = fabs(m->F[0]) + fabs(m->F[1]) * 2.0 + fabs(m->F[2]) * 8192.0 + fabs(m->F[3]) * 4.0 +
-            fabs(m->F[4]) * 3.637978807091713e-12 + fabs(m->F[5]) * 3.637978807091713e-12 +
-            fabs(m->F[6]) * 3.637978807091713e-12 + fabs(m->F[7]) * 3.637978807091713e-12 +
-            fabs(m->F[8]) * 3.637978807091713e-12 + fabs(m->F[9]) * 3.637978807091713e-12;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[10]) + fabs(m->F[11]) * 2.0 + fabs(m->F[12]) * 4096.0 + fabs(m->F[13]) *
-            3.637978807091713e-12 + fabs(m->F[14]) * 3.637978807091713e-12 + fabs(m->F[15]) *
-            3.637978807091713e-12 + fabs(m->F[16]) * 3.637978807091713e-12 + fabs(m->F[17]) *
-            3.637978807091713e-12 + fabs(m->F[18]) * 3.637978807091713e-12;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[19]) * 0.5 + fabs(m->F[20]) * 0.5 + fabs(m->F[21]) * 4096.0 + fabs(m->F[22]) * 2.0
-            + fabs(m->F[23]) * 1.8189894035458565e-12 + fabs(m->F[24]) * 1.8189894035458565e-12 +
-            fabs(m->F[25]) * 1.8189894035458565e-12 + fabs(m->F[26]) * 1.8189894035458565e-12 +
-            fabs(m->F[27]) * 1.8189894035458565e-12 + fabs(m->F[28]) * 1.8189894035458565e-12;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[29]) * 0.000244140625 + fabs(m->F[30]) * 0.00048828125 + fabs(m->F[31]) +
-            fabs(m->F[32]) * 2.0 + fabs(m->F[33]) * 0.0009765625 + fabs(m->F[34]) *
-            8.881784197001252e-16 + fabs(m->F[35]) * 8.881784197001252e-16 + fabs(m->F[36]) *
-            0.0009765625;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[37]) * 0.0001220703125 + fabs(m->F[38]) * 0.000244140625 + fabs(m->F[39]) * 0.5 +
-            fabs(m->F[40]) + fabs(m->F[41]) * 0.00048828125 + fabs(m->F[42]) * 4.440892098500626e-16
-            + fabs(m->F[43]) * 4.440892098500626e-16 + fabs(m->F[44]) * 0.00048828125;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[45]) * 1024.0;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[46]) * 1.862645149230957e-09 + fabs(m->F[47]) * 9.094947017729282e-13;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[48]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[49]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[50]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[51]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[52]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[53]);
+    ned_doppler18_twin_scalar norm = 0.0;
+    lane_pair lanes;
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[0]), fabs(m->F[19])), lane_pair_of(1.0, 0.5));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[1]), fabs(m->F[20])),
+            lane_pair_of(2.0, 0.5));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[2]), fabs(m->F[21])),
+            lane_pair_of(8192.0, 4096.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[3]), fabs(m->F[22])),
+            lane_pair_of(4.0, 2.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[4]), fabs(m->F[23])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[5]), fabs(m->F[24])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[6]), fabs(m->F[25])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[7]), fabs(m->F[26])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[8]), fabs(m->F[27])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[9]), fabs(m->F[28])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[10]), fabs(m->F[29])), lane_pair_of(1.0,
+            0.000244140625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[11]), fabs(m->F[30])),
+            lane_pair_of(2.0, 0.00048828125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[12]), fabs(m->F[31])),
+            lane_pair_of(4096.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[13]), fabs(m->F[32])),
+            lane_pair_of(3.637978807091713e-12, 2.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[14]), fabs(m->F[33])),
+            lane_pair_of(3.637978807091713e-12, 0.0009765625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[15]), fabs(m->F[34])),
+            lane_pair_of(3.637978807091713e-12, 8.881784197001252e-16));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[16]), fabs(m->F[35])),
+            lane_pair_of(3.637978807091713e-12, 8.881784197001252e-16));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[17]), fabs(m->F[36])),
+            lane_pair_of(3.637978807091713e-12, 0.0009765625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[18]), 0.0),
+            lane_pair_of(3.637978807091713e-12, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[37]), fabs(m->F[46])),
+            lane_pair_of(0.0001220703125, 1.862645149230957e-09));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[38]), fabs(m->F[47])),
+            lane_pair_of(0.000244140625, 9.094947017729282e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[39]), 0.0), lane_pair_of(0.5, 1.0));
+    lanes = lane_pair_add(lanes, lane_pair_of(fabs(m->F[40]), 0.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[41]), 0.0),
+            lane_pair_of(0.00048828125, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[42]), 0.0),
+            lane_pair_of(4.440892098500626e-16, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[43]), 0.0),
+            lane_pair_of(4.440892098500626e-16, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[44]), 0.0),
+            lane_pair_of(0.00048828125, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[45]), fabs(m->F[48])), lane_pair_of(1024.0,
+            1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[49]), fabs(m->F[50]));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[51]), fabs(m->F[52]));
+    norm = lane_pair_max(lanes, norm);
+    const ned_doppler18_twin_scalar v = fabs(m->F[53]);
     norm = v > norm ? v : norm;
     return norm;
 }
@@ -429,9 +453,12 @@ static ned_doppler18_twin_scalar balanced_norm(const ned_doppler18_twin_matrices
            balancing
    in powers of two, starting from the fixed D (at the check operating point one sweep finds it a
            fixed
-   point) and stopped at a fixed point; the sums in the reference's order (row by row). */
-static ned_doppler18_twin_scalar rebalanced_norm(const ned_doppler18_twin_matrices *restrict m,
-        ned_doppler18_twin_discretize_scratch *restrict w)
+   point) and stopped at a fixed point; the sums in the reference's order (row by row).
+   Not inlined: it runs only when a doubling is at stake, and inlined, gcc -O2 would keep
+   balanced_norm's |F_ij| on the stack for it on every call (bench/bench_cycle.py: 130
+   instructions at 18 states). */
+NED_DOPPLER18_TWIN_BLOCK ned_doppler18_twin_scalar rebalanced_norm(const ned_doppler18_twin_matrices
+        *restrict m, ned_doppler18_twin_discretize_scratch *restrict w)
 {
     ned_doppler18_twin_scalar v, norm = 0.0;
     signed char exponent[NED_DOPPLER18_TWIN_N_STATES]; /* within [-40, 40] */

@@ -448,61 +448,110 @@ static const signed char balance_exponent[NED_DOPPLER32_AUGMENTED_N_STATES] = { 
 static ned_doppler32_augmented_scalar balanced_norm(const ned_doppler32_augmented_matrices *restrict
         m)
 {
-    ned_doppler32_augmented_scalar v, norm = 0.0;
-    v = fabs(m->F[0]) + fabs(m->F[1]) * 2.0 + fabs(m->F[2]) * 8192.0 + fabs(m->F[3]) * 4.0 +
-            fabs(m->F[4]) * 3.637978807091713e-12 + fabs(m->F[5]) * 3.637978807091713e-12 +
-            fabs(m->F[6]) * 3.637978807091713e-12 + fabs(m->F[7]) * 3.637978807091713e-12 +
-            fabs(m->F[8]) * 3.637978807091713e-12 + fabs(m->F[9]) * 3.637978807091713e-12 +
-            fabs(m->F[10]) * 4.0 + fabs(m->F[11]) * 3.637978807091713e-12 + fabs(m->F[12]) *
-            3.637978807091713e-12 + fabs(m->F[13]) * 3.637978807091713e-12 + fabs(m->F[14]) *
-            3.637978807091713e-12 + fabs(m->F[15]) * 4.0 + fabs(m->F[16]) * 3.637978807091713e-12 +
-            fabs(m->F[17]) * 4.0 + fabs(m->F[18]) * 3.637978807091713e-12;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[19]) + fabs(m->F[20]) * 2.0 + fabs(m->F[21]) * 4096.0 + fabs(m->F[22]) *
-            3.637978807091713e-12 + fabs(m->F[23]) * 3.637978807091713e-12 + fabs(m->F[24]) *
-            3.637978807091713e-12 + fabs(m->F[25]) * 3.637978807091713e-12 + fabs(m->F[26]) *
-            3.637978807091713e-12 + fabs(m->F[27]) * 3.637978807091713e-12 + fabs(m->F[28]) * 4.0 +
-            fabs(m->F[29]) * 3.637978807091713e-12 + fabs(m->F[30]) * 3.637978807091713e-12 +
-            fabs(m->F[31]) * 3.637978807091713e-12 + fabs(m->F[32]) * 3.637978807091713e-12 +
-            fabs(m->F[33]) * 4.0 + fabs(m->F[34]) * 3.637978807091713e-12 + fabs(m->F[35]) * 4.0 +
-            fabs(m->F[36]) * 3.637978807091713e-12;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[37]) * 0.5 + fabs(m->F[38]) * 0.5 + fabs(m->F[39]) * 4096.0 + fabs(m->F[40]) * 2.0
-            + fabs(m->F[41]) * 1.8189894035458565e-12 + fabs(m->F[42]) * 1.8189894035458565e-12 +
-            fabs(m->F[43]) * 1.8189894035458565e-12 + fabs(m->F[44]) * 1.8189894035458565e-12 +
-            fabs(m->F[45]) * 1.8189894035458565e-12 + fabs(m->F[46]) * 1.8189894035458565e-12 +
-            fabs(m->F[47]) * 2.0 + fabs(m->F[48]) * 1.8189894035458565e-12 + fabs(m->F[49]) *
-            1.8189894035458565e-12 + fabs(m->F[50]) * 1.8189894035458565e-12 + fabs(m->F[51]) *
-            1.8189894035458565e-12 + fabs(m->F[52]) * 2.0 + fabs(m->F[53]) * 1.8189894035458565e-12
-            + fabs(m->F[54]) * 2.0 + fabs(m->F[55]) * 1.8189894035458565e-12;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[56]) * 0.000244140625 + fabs(m->F[57]) * 0.00048828125 + fabs(m->F[58]) +
-            fabs(m->F[59]) * 2.0 + fabs(m->F[60]) * 0.0009765625 + fabs(m->F[61]) *
-            8.881784197001252e-16 + fabs(m->F[62]) * 8.881784197001252e-16 + fabs(m->F[63]) *
-            0.0009765625 + fabs(m->F[64]) * 0.0009765625 + fabs(m->F[65]) * 8.881784197001252e-16 +
-            fabs(m->F[66]) * 0.0009765625;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[67]) * 0.0001220703125 + fabs(m->F[68]) * 0.000244140625 + fabs(m->F[69]) * 0.5 +
-            fabs(m->F[70]) + fabs(m->F[71]) * 0.00048828125 + fabs(m->F[72]) * 4.440892098500626e-16
-            + fabs(m->F[73]) * 4.440892098500626e-16 + fabs(m->F[74]) * 0.00048828125 +
-            fabs(m->F[75]) * 0.00048828125 + fabs(m->F[76]) * 4.440892098500626e-16 + fabs(m->F[77])
-            * 0.00048828125;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[78]) * 1024.0;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[79]) * 1.862645149230957e-09 + fabs(m->F[80]) * 9.094947017729282e-13;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[81]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[82]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[83]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[84]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[85]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[86]);
+    ned_doppler32_augmented_scalar norm = 0.0;
+    lane_pair lanes;
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[0]), fabs(m->F[37])), lane_pair_of(1.0, 0.5));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[1]), fabs(m->F[38])),
+            lane_pair_of(2.0, 0.5));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[2]), fabs(m->F[39])),
+            lane_pair_of(8192.0, 4096.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[3]), fabs(m->F[40])),
+            lane_pair_of(4.0, 2.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[4]), fabs(m->F[41])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[5]), fabs(m->F[42])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[6]), fabs(m->F[43])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[7]), fabs(m->F[44])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[8]), fabs(m->F[45])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[9]), fabs(m->F[46])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[10]), fabs(m->F[47])),
+            lane_pair_of(4.0, 2.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[11]), fabs(m->F[48])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[12]), fabs(m->F[49])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[13]), fabs(m->F[50])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[14]), fabs(m->F[51])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[15]), fabs(m->F[52])),
+            lane_pair_of(4.0, 2.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[16]), fabs(m->F[53])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[17]), fabs(m->F[54])),
+            lane_pair_of(4.0, 2.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[18]), fabs(m->F[55])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[19]), fabs(m->F[56])), lane_pair_of(1.0,
+            0.000244140625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[20]), fabs(m->F[57])),
+            lane_pair_of(2.0, 0.00048828125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[21]), fabs(m->F[58])),
+            lane_pair_of(4096.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[22]), fabs(m->F[59])),
+            lane_pair_of(3.637978807091713e-12, 2.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[23]), fabs(m->F[60])),
+            lane_pair_of(3.637978807091713e-12, 0.0009765625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[24]), fabs(m->F[61])),
+            lane_pair_of(3.637978807091713e-12, 8.881784197001252e-16));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[25]), fabs(m->F[62])),
+            lane_pair_of(3.637978807091713e-12, 8.881784197001252e-16));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[26]), fabs(m->F[63])),
+            lane_pair_of(3.637978807091713e-12, 0.0009765625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[27]), fabs(m->F[64])),
+            lane_pair_of(3.637978807091713e-12, 0.0009765625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[28]), fabs(m->F[65])),
+            lane_pair_of(4.0, 8.881784197001252e-16));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[29]), fabs(m->F[66])),
+            lane_pair_of(3.637978807091713e-12, 0.0009765625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[30]), 0.0),
+            lane_pair_of(3.637978807091713e-12, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[31]), 0.0),
+            lane_pair_of(3.637978807091713e-12, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[32]), 0.0),
+            lane_pair_of(3.637978807091713e-12, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[33]), 0.0), lane_pair_of(4.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[34]), 0.0),
+            lane_pair_of(3.637978807091713e-12, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[35]), 0.0), lane_pair_of(4.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[36]), 0.0),
+            lane_pair_of(3.637978807091713e-12, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[67]), fabs(m->F[79])),
+            lane_pair_of(0.0001220703125, 1.862645149230957e-09));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[68]), fabs(m->F[80])),
+            lane_pair_of(0.000244140625, 9.094947017729282e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[69]), 0.0), lane_pair_of(0.5, 1.0));
+    lanes = lane_pair_add(lanes, lane_pair_of(fabs(m->F[70]), 0.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[71]), 0.0),
+            lane_pair_of(0.00048828125, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[72]), 0.0),
+            lane_pair_of(4.440892098500626e-16, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[73]), 0.0),
+            lane_pair_of(4.440892098500626e-16, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[74]), 0.0),
+            lane_pair_of(0.00048828125, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[75]), 0.0),
+            lane_pair_of(0.00048828125, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[76]), 0.0),
+            lane_pair_of(4.440892098500626e-16, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[77]), 0.0),
+            lane_pair_of(0.00048828125, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[78]), fabs(m->F[81])), lane_pair_of(1024.0,
+            1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[82]), fabs(m->F[83]));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[84]), fabs(m->F[85]));
+    norm = lane_pair_max(lanes, norm);
+    const ned_doppler32_augmented_scalar v = fabs(m->F[86]);
     norm = v > norm ? v : norm;
     return norm;
 }
@@ -513,9 +562,13 @@ static ned_doppler32_augmented_scalar balanced_norm(const ned_doppler32_augmente
            balancing
    in powers of two, starting from the fixed D (at the check operating point one sweep finds it a
            fixed
-   point) and stopped at a fixed point; the sums in the reference's order (row by row). */
-static ned_doppler32_augmented_scalar rebalanced_norm(const ned_doppler32_augmented_matrices
-        *restrict m, ned_doppler32_augmented_discretize_scratch *restrict w)
+   point) and stopped at a fixed point; the sums in the reference's order (row by row).
+   Not inlined: it runs only when a doubling is at stake, and inlined, gcc -O2 would keep
+   balanced_norm's |F_ij| on the stack for it on every call (bench/bench_cycle.py: 130
+   instructions at 18 states). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar rebalanced_norm(const
+        ned_doppler32_augmented_matrices *restrict m, ned_doppler32_augmented_discretize_scratch
+        *restrict w)
 {
     ned_doppler32_augmented_scalar v, norm = 0.0;
     signed char exponent[NED_DOPPLER32_AUGMENTED_N_STATES]; /* within [-40, 40] */

@@ -371,48 +371,72 @@ static const signed char balance_exponent[NED_DOPPLER18_N_STATES] = { -2, -2, -1
    power of two.  A plan on it that needs a doubling is retaken on rebalanced_norm. */
 static ned_doppler18_scalar balanced_norm(const ned_doppler18_matrices *restrict m)
 {
-    ned_doppler18_scalar v, norm = 0.0F;
-    v = fabsf(m->F[0]) + fabsf(m->F[1]) * 2.0F + fabsf(m->F[2]) * 8192.0F + fabsf(m->F[3]) * 4.0F +
-            fabsf(m->F[4]) * 3.637978807091713e-12F + fabsf(m->F[5]) * 3.637978807091713e-12F +
-            fabsf(m->F[6]) * 3.637978807091713e-12F + fabsf(m->F[7]) * 3.637978807091713e-12F +
-            fabsf(m->F[8]) * 3.637978807091713e-12F + fabsf(m->F[9]) * 3.637978807091713e-12F;
-    norm = v > norm ? v : norm;
-    v = fabsf(m->F[10]) + fabsf(m->F[11]) * 2.0F + fabsf(m->F[12]) * 4096.0F + fabsf(m->F[13]) *
-            3.637978807091713e-12F + fabsf(m->F[14]) * 3.637978807091713e-12F + fabsf(m->F[15]) *
-            3.637978807091713e-12F + fabsf(m->F[16]) * 3.637978807091713e-12F + fabsf(m->F[17]) *
-            3.637978807091713e-12F + fabsf(m->F[18]) * 3.637978807091713e-12F;
-    norm = v > norm ? v : norm;
-    v = fabsf(m->F[19]) * 0.5F + fabsf(m->F[20]) * 0.5F + fabsf(m->F[21]) * 4096.0F +
-            fabsf(m->F[22]) * 2.0F + fabsf(m->F[23]) * 1.8189894035458565e-12F + fabsf(m->F[24]) *
-            1.8189894035458565e-12F + fabsf(m->F[25]) * 1.8189894035458565e-12F + fabsf(m->F[26]) *
-            1.8189894035458565e-12F + fabsf(m->F[27]) * 1.8189894035458565e-12F + fabsf(m->F[28]) *
-            1.8189894035458565e-12F;
-    norm = v > norm ? v : norm;
-    v = fabsf(m->F[29]) * 0.000244140625F + fabsf(m->F[30]) * 0.00048828125F + fabsf(m->F[31]) +
-            fabsf(m->F[32]) * 2.0F + fabsf(m->F[33]) * 0.0009765625F + fabsf(m->F[34]) *
-            8.881784197001252e-16F + fabsf(m->F[35]) * 8.881784197001252e-16F + fabsf(m->F[36]) *
-            0.0009765625F;
-    norm = v > norm ? v : norm;
-    v = fabsf(m->F[37]) * 0.0001220703125F + fabsf(m->F[38]) * 0.000244140625F + fabsf(m->F[39]) *
-            0.5F + fabsf(m->F[40]) + fabsf(m->F[41]) * 0.00048828125F + fabsf(m->F[42]) *
-            4.440892098500626e-16F + fabsf(m->F[43]) * 4.440892098500626e-16F + fabsf(m->F[44]) *
-            0.00048828125F;
-    norm = v > norm ? v : norm;
-    v = fabsf(m->F[45]) * 1024.0F;
-    norm = v > norm ? v : norm;
-    v = fabsf(m->F[46]) * 1.862645149230957e-09F + fabsf(m->F[47]) * 9.094947017729282e-13F;
-    norm = v > norm ? v : norm;
-    v = fabsf(m->F[48]);
-    norm = v > norm ? v : norm;
-    v = fabsf(m->F[49]);
-    norm = v > norm ? v : norm;
-    v = fabsf(m->F[50]);
-    norm = v > norm ? v : norm;
-    v = fabsf(m->F[51]);
-    norm = v > norm ? v : norm;
-    v = fabsf(m->F[52]);
-    norm = v > norm ? v : norm;
-    v = fabsf(m->F[53]);
+    ned_doppler18_scalar norm = 0.0F;
+    lane_pair lanes;
+    lanes = lane_pair_product(lane_pair_of(fabsf(m->F[0]), fabsf(m->F[19])), lane_pair_of(1.0F,
+            0.5F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[1]), fabsf(m->F[20])),
+            lane_pair_of(2.0F, 0.5F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[2]), fabsf(m->F[21])),
+            lane_pair_of(8192.0F, 4096.0F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[3]), fabsf(m->F[22])),
+            lane_pair_of(4.0F, 2.0F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[4]), fabsf(m->F[23])),
+            lane_pair_of(3.637978807091713e-12F, 1.8189894035458565e-12F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[5]), fabsf(m->F[24])),
+            lane_pair_of(3.637978807091713e-12F, 1.8189894035458565e-12F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[6]), fabsf(m->F[25])),
+            lane_pair_of(3.637978807091713e-12F, 1.8189894035458565e-12F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[7]), fabsf(m->F[26])),
+            lane_pair_of(3.637978807091713e-12F, 1.8189894035458565e-12F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[8]), fabsf(m->F[27])),
+            lane_pair_of(3.637978807091713e-12F, 1.8189894035458565e-12F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[9]), fabsf(m->F[28])),
+            lane_pair_of(3.637978807091713e-12F, 1.8189894035458565e-12F));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabsf(m->F[10]), fabsf(m->F[29])), lane_pair_of(1.0F,
+            0.000244140625F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[11]), fabsf(m->F[30])),
+            lane_pair_of(2.0F, 0.00048828125F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[12]), fabsf(m->F[31])),
+            lane_pair_of(4096.0F, 1.0F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[13]), fabsf(m->F[32])),
+            lane_pair_of(3.637978807091713e-12F, 2.0F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[14]), fabsf(m->F[33])),
+            lane_pair_of(3.637978807091713e-12F, 0.0009765625F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[15]), fabsf(m->F[34])),
+            lane_pair_of(3.637978807091713e-12F, 8.881784197001252e-16F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[16]), fabsf(m->F[35])),
+            lane_pair_of(3.637978807091713e-12F, 8.881784197001252e-16F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[17]), fabsf(m->F[36])),
+            lane_pair_of(3.637978807091713e-12F, 0.0009765625F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[18]), 0.0F),
+            lane_pair_of(3.637978807091713e-12F, 1.0F));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabsf(m->F[37]), fabsf(m->F[46])),
+            lane_pair_of(0.0001220703125F, 1.862645149230957e-09F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[38]), fabsf(m->F[47])),
+            lane_pair_of(0.000244140625F, 9.094947017729282e-13F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[39]), 0.0F), lane_pair_of(0.5F,
+            1.0F));
+    lanes = lane_pair_add(lanes, lane_pair_of(fabsf(m->F[40]), 0.0F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[41]), 0.0F),
+            lane_pair_of(0.00048828125F, 1.0F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[42]), 0.0F),
+            lane_pair_of(4.440892098500626e-16F, 1.0F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[43]), 0.0F),
+            lane_pair_of(4.440892098500626e-16F, 1.0F));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[44]), 0.0F),
+            lane_pair_of(0.00048828125F, 1.0F));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabsf(m->F[45]), fabsf(m->F[48])), lane_pair_of(1024.0F,
+            1.0F));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabsf(m->F[49]), fabsf(m->F[50]));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabsf(m->F[51]), fabsf(m->F[52]));
+    norm = lane_pair_max(lanes, norm);
+    const ned_doppler18_scalar v = fabsf(m->F[53]);
     norm = v > norm ? v : norm;
     return norm;
 }
@@ -423,8 +447,11 @@ static ned_doppler18_scalar balanced_norm(const ned_doppler18_matrices *restrict
            balancing
    in powers of two, starting from the fixed D (at the check operating point one sweep finds it a
            fixed
-   point) and stopped at a fixed point; the sums in the reference's order (row by row). */
-static ned_doppler18_scalar rebalanced_norm(const ned_doppler18_matrices *restrict m,
+   point) and stopped at a fixed point; the sums in the reference's order (row by row).
+   Not inlined: it runs only when a doubling is at stake, and inlined, gcc -O2 would keep
+   balanced_norm's |F_ij| on the stack for it on every call (bench/bench_cycle.py: 130
+   instructions at 18 states). */
+NED_DOPPLER18_BLOCK ned_doppler18_scalar rebalanced_norm(const ned_doppler18_matrices *restrict m,
         ned_doppler18_discretize_scratch *restrict w)
 {
     ned_doppler18_scalar v, norm = 0.0F;

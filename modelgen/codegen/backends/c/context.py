@@ -439,6 +439,40 @@ def _scaled_norm_rows(structure: FilterStructure, scaling: tuple[int, ...], scal
     ]
 
 
+def _balanced_norm_lines(rows: list[tuple[int, list[tuple[int, str | None]]]], scalar: str, scalar_type: str) -> list[str]:
+    """The body of the unrolled ||F||_D = max_i sum_j |F_ij| d_j / d_i: two rows at a time, one in each lane.
+
+    Each lane sums its row's terms in the reference's order (the same bits as
+    one row at a time); the shorter row's lane adds zeros past its end (exact:
+    the terms are not negative) and a factor of 1 multiplies where the other
+    lane's term has a factor (exact).  The rows are paired longest first; F is
+    finite here (discretize refused it otherwise), so the maximum does not
+    depend on the order of the rows.  One product and one sum per two terms
+    (bench/bench_cycle.py: 36 fewer instructions per cycle at 18 states).
+    """
+    fabs = "fabsf" if scalar == "float" else "fabs"
+    one, zero = c_number(1.0, scalar), c_number(0.0, scalar)
+    ordered = sorted(rows, key=lambda row: -len(row[1]))
+    lines = ["lane_pair lanes;"] if len(ordered) > 1 else []
+    for k in range(0, len(ordered) - 1, 2):
+        (_, a), (_, b) = ordered[k], ordered[k + 1]
+        for n in range(len(a)):
+            (ea, fa), (eb, fb) = a[n], b[n] if n < len(b) else (None, None)
+            value = f"lane_pair_of({fabs}(m->F[{ea}]), " + (f"{fabs}(m->F[{eb}]))" if eb is not None else f"{zero})")
+            if fa is not None or fb is not None:
+                factor = f"lane_pair_of({fa or one}, {fb or one})"
+                lines.append(f"lanes = lane_pair_product({value}, {factor});" if n == 0 else
+                             f"lanes = lane_pair_add_product(lanes, {value}, {factor});")
+            else:
+                lines.append(f"lanes = {value};" if n == 0 else f"lanes = lane_pair_add(lanes, {value});")
+        lines.append("norm = lane_pair_max(lanes, norm);")
+    if len(ordered) % 2:
+        _, entries = ordered[-1]
+        lines.append(f"const {scalar_type} v = " + " + ".join(f"{fabs}(m->F[{e}])" + (f" * {f}" if f else "") for e, f in entries) + ";")
+        lines.append("norm = v > norm ? v : norm;")
+    return lines
+
+
 def _balance_states(structure: FilterStructure) -> list[tuple[int, str]]:
     """States with an off-diagonal entry of F in their row and column ('both'), row only or column only.
 
@@ -645,7 +679,8 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         "balance_states": _balance_states(structure),
         "norm_rows": _norm_rows(structure),
         "balance_scaling": list(scaling) if scaling is not None else None,
-        "scaled_norm_rows": _scaled_norm_rows(structure, scaling, options.scalar) if scaling is not None else [],
+        "balanced_norm_lines": _balanced_norm_lines(_scaled_norm_rows(structure, scaling, options.scalar), options.scalar,
+                                                    f"{model.name}_scalar") if scaling is not None else [],
         "discretize_sizes": {"terms": unrolled.term_size, "active": unrolled.active_size} if unrolled else {},
         "discretize_blocks": discretize,
         "discretize_calls": {f["name"]: f["call"] for f in discretize},
