@@ -2117,17 +2117,38 @@ ENU_DOPPLER18_TWIN_BLOCK void horner_transition(enu_doppler18_twin_transition *r
         t->Phi[7+k] = fh_pairs[0]*w->S[21+k] + fh_pairs[2]*w->S[35+k] + fh_pairs[4]*w->S[63+k] +
                 fh_pairs[6]*w->S[119+k];
     }
-    for (k = 0; k < 6; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
-                lane_pair_load(&w->S[22+k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[22]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
-                lane_pair_load(&w->S[36+k]));
+                lane_pair_load(&w->S[36]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
-                lane_pair_load(&w->S[64+k]));
+                lane_pair_load(&w->S[64]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
-                lane_pair_load(&w->S[120+k]));
-        lane_pair_store(&t->Phi[11+k], lanes);
+                lane_pair_load(&w->S[120]));
+        lane_pair_store(&t->Phi[11], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[24]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[122]));
+        lane_pair_store(&t->Phi[13], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[40]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[68]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[124]));
+        lane_pair_store(&t->Phi[15], lanes);
     }
     for (k = 0; k < 7; ++k) {
         t->Phi[17+k] = fh_pairs[20]*w->S[k] + fh_pairs[22]*w->S[28+k] + fh_pairs[24]*w->S[42+k] +
@@ -2137,19 +2158,44 @@ ENU_DOPPLER18_TWIN_BLOCK void horner_transition(enu_doppler18_twin_transition *r
         t->Phi[24+k] = fh_pairs[20]*w->S[7+k] + fh_pairs[22]*w->S[35+k] + fh_pairs[24]*w->S[49+k] +
                 fh_pairs[26]*w->S[91+k] + fh_pairs[28]*w->S[119+k];
     }
-    for (k = 0; k < 6; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]),
-                lane_pair_load(&w->S[8+k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[8]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
-                lane_pair_load(&w->S[36+k]));
+                lane_pair_load(&w->S[36]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
-                lane_pair_load(&w->S[50+k]));
+                lane_pair_load(&w->S[50]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
-                lane_pair_load(&w->S[92+k]));
+                lane_pair_load(&w->S[92]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[28]),
-                lane_pair_load(&w->S[120+k]));
-        lane_pair_store(&t->Phi[28+k], lanes);
+                lane_pair_load(&w->S[120]));
+        lane_pair_store(&t->Phi[28], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->S[94]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[28]),
+                lane_pair_load(&w->S[122]));
+        lane_pair_store(&t->Phi[30], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[12]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[40]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->S[96]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[28]),
+                lane_pair_load(&w->S[124]));
+        lane_pair_store(&t->Phi[32], lanes);
     }
     for (k = 0; k < 7; ++k) {
         t->Phi[34+k] = fh_pairs[42]*w->S[k] + fh_pairs[44]*w->S[14+k] + fh_pairs[46]*w->S[42+k] +
@@ -2159,19 +2205,44 @@ ENU_DOPPLER18_TWIN_BLOCK void horner_transition(enu_doppler18_twin_transition *r
         t->Phi[41+k] = fh_pairs[42]*w->S[7+k] + fh_pairs[44]*w->S[21+k] + fh_pairs[46]*w->S[49+k] +
                 fh_pairs[48]*w->S[91+k] + fh_pairs[50]*w->S[119+k];
     }
-    for (k = 0; k < 6; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[42]),
-                lane_pair_load(&w->S[8+k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[42]), lane_pair_load(&w->S[8]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
-                lane_pair_load(&w->S[22+k]));
+                lane_pair_load(&w->S[22]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
-                lane_pair_load(&w->S[50+k]));
+                lane_pair_load(&w->S[50]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
-                lane_pair_load(&w->S[92+k]));
+                lane_pair_load(&w->S[92]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
-                lane_pair_load(&w->S[120+k]));
-        lane_pair_store(&t->Phi[45+k], lanes);
+                lane_pair_load(&w->S[120]));
+        lane_pair_store(&t->Phi[45], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[42]), lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[24]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->S[94]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[122]));
+        lane_pair_store(&t->Phi[47], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[42]), lane_pair_load(&w->S[12]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->S[96]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[124]));
+        lane_pair_store(&t->Phi[49], lanes);
     }
     for (k = 0; k < 7; ++k) {
         t->Phi[51+k] = fh_pairs[64]*w->S[14+k] + fh_pairs[66]*w->S[28+k] + fh_pairs[68]*w->S[42+k] +
@@ -2183,23 +2254,56 @@ ENU_DOPPLER18_TWIN_BLOCK void horner_transition(enu_doppler18_twin_transition *r
                 fh_pairs[70]*w->S[63+k] + fh_pairs[72]*w->S[77+k] + fh_pairs[74]*w->S[91+k] +
                 fh_pairs[76]*w->S[119+k];
     }
-    for (k = 0; k < 6; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[64]),
-                lane_pair_load(&w->S[22+k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[64]), lane_pair_load(&w->S[22]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
-                lane_pair_load(&w->S[36+k]));
+                lane_pair_load(&w->S[36]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[68]),
-                lane_pair_load(&w->S[50+k]));
+                lane_pair_load(&w->S[50]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
-                lane_pair_load(&w->S[64+k]));
+                lane_pair_load(&w->S[64]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[72]),
-                lane_pair_load(&w->S[78+k]));
+                lane_pair_load(&w->S[78]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[74]),
-                lane_pair_load(&w->S[92+k]));
+                lane_pair_load(&w->S[92]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
-                lane_pair_load(&w->S[120+k]));
-        lane_pair_store(&t->Phi[62+k], lanes);
+                lane_pair_load(&w->S[120]));
+        lane_pair_store(&t->Phi[62], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[64]), lane_pair_load(&w->S[24]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[68]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->S[66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[72]),
+                lane_pair_load(&w->S[80]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[74]),
+                lane_pair_load(&w->S[94]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[122]));
+        lane_pair_store(&t->Phi[64], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[64]), lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[40]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[68]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->S[68]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[72]),
+                lane_pair_load(&w->S[82]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[74]),
+                lane_pair_load(&w->S[96]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[124]));
+        lane_pair_store(&t->Phi[66], lanes);
     }
     for (k = 0; k < 7; ++k) {
         t->Phi[68+k] = fh_pairs[84]*w->S[k] + fh_pairs[86]*w->S[28+k] + fh_pairs[88]*w->S[42+k] +
@@ -2211,23 +2315,56 @@ ENU_DOPPLER18_TWIN_BLOCK void horner_transition(enu_doppler18_twin_transition *r
                 fh_pairs[90]*w->S[63+k] + fh_pairs[92]*w->S[77+k] + fh_pairs[94]*w->S[91+k] +
                 fh_pairs[96]*w->S[119+k];
     }
-    for (k = 0; k < 6; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[84]),
-                lane_pair_load(&w->S[8+k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[84]), lane_pair_load(&w->S[8]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[86]),
-                lane_pair_load(&w->S[36+k]));
+                lane_pair_load(&w->S[36]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[88]),
-                lane_pair_load(&w->S[50+k]));
+                lane_pair_load(&w->S[50]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[90]),
-                lane_pair_load(&w->S[64+k]));
+                lane_pair_load(&w->S[64]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[92]),
-                lane_pair_load(&w->S[78+k]));
+                lane_pair_load(&w->S[78]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
-                lane_pair_load(&w->S[92+k]));
+                lane_pair_load(&w->S[92]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[96]),
-                lane_pair_load(&w->S[120+k]));
-        lane_pair_store(&t->Phi[79+k], lanes);
+                lane_pair_load(&w->S[120]));
+        lane_pair_store(&t->Phi[79], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[84]), lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[86]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[88]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[90]),
+                lane_pair_load(&w->S[66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[92]),
+                lane_pair_load(&w->S[80]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->S[94]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[96]),
+                lane_pair_load(&w->S[122]));
+        lane_pair_store(&t->Phi[81], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[84]), lane_pair_load(&w->S[12]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[86]),
+                lane_pair_load(&w->S[40]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[88]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[90]),
+                lane_pair_load(&w->S[68]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[92]),
+                lane_pair_load(&w->S[82]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->S[96]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[96]),
+                lane_pair_load(&w->S[124]));
+        lane_pair_store(&t->Phi[83], lanes);
     }
     for (k = 0; k < 7; ++k) {
         t->Phi[85+k] = fh_pairs[104]*w->S[k] + fh_pairs[106]*w->S[14+k] + fh_pairs[108]*w->S[42+k] +
@@ -2237,21 +2374,52 @@ ENU_DOPPLER18_TWIN_BLOCK void horner_transition(enu_doppler18_twin_transition *r
         t->Phi[92+k] = fh_pairs[104]*w->S[7+k] + fh_pairs[106]*w->S[21+k] + fh_pairs[108]*w->S[49+k]
                 + fh_pairs[110]*w->S[63+k] + fh_pairs[112]*w->S[91+k] + fh_pairs[114]*w->S[119+k];
     }
-    for (k = 0; k < 6; k += 2) {
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[104]), lane_pair_load(&w->S[8]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[106]),
+                lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[108]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[110]),
+                lane_pair_load(&w->S[64]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->S[92]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[120]));
+        lane_pair_store(&t->Phi[96], lanes);
+    }
+    {
         lane_pair lanes;
         lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[104]),
-                lane_pair_load(&w->S[8+k]));
+                lane_pair_load(&w->S[10]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[106]),
-                lane_pair_load(&w->S[22+k]));
+                lane_pair_load(&w->S[24]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[108]),
-                lane_pair_load(&w->S[50+k]));
+                lane_pair_load(&w->S[52]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[110]),
-                lane_pair_load(&w->S[64+k]));
+                lane_pair_load(&w->S[66]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[112]),
-                lane_pair_load(&w->S[92+k]));
+                lane_pair_load(&w->S[94]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
-                lane_pair_load(&w->S[120+k]));
-        lane_pair_store(&t->Phi[96+k], lanes);
+                lane_pair_load(&w->S[122]));
+        lane_pair_store(&t->Phi[98], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[104]),
+                lane_pair_load(&w->S[12]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[106]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[108]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[110]),
+                lane_pair_load(&w->S[68]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->S[96]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[124]));
+        lane_pair_store(&t->Phi[100], lanes);
     }
     for (k = 0; k < 7; ++k) {
         t->Phi[102+k] = fh_pairs[122]*w->S[56+k] + fh_pairs[124]*w->S[112+k];
@@ -2259,13 +2427,29 @@ ENU_DOPPLER18_TWIN_BLOCK void horner_transition(enu_doppler18_twin_transition *r
     for (k = 0; k < 1; ++k) {
         t->Phi[109+k] = fh_pairs[122]*w->S[63+k] + fh_pairs[124]*w->S[119+k];
     }
-    for (k = 0; k < 6; k += 2) {
+    {
         lane_pair lanes;
         lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[122]),
-                lane_pair_load(&w->S[64+k]));
+                lane_pair_load(&w->S[64]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[124]),
-                lane_pair_load(&w->S[120+k]));
-        lane_pair_store(&t->Phi[113+k], lanes);
+                lane_pair_load(&w->S[120]));
+        lane_pair_store(&t->Phi[113], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[122]),
+                lane_pair_load(&w->S[66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[124]),
+                lane_pair_load(&w->S[122]));
+        lane_pair_store(&t->Phi[115], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[122]),
+                lane_pair_load(&w->S[68]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[124]),
+                lane_pair_load(&w->S[124]));
+        lane_pair_store(&t->Phi[117], lanes);
     }
     for (k = 0; k < 7; ++k) {
         t->Phi[119+k] = fh_pairs[126]*w->S[42+k] + fh_pairs[128]*w->S[84+k] +
@@ -2275,15 +2459,35 @@ ENU_DOPPLER18_TWIN_BLOCK void horner_transition(enu_doppler18_twin_transition *r
         t->Phi[127+k] = fh_pairs[126]*w->S[49+k] + fh_pairs[128]*w->S[91+k] +
                 fh_pairs[130]*w->S[119+k];
     }
-    for (k = 0; k < 6; k += 2) {
+    {
         lane_pair lanes;
         lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[126]),
-                lane_pair_load(&w->S[50+k]));
+                lane_pair_load(&w->S[50]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[128]),
-                lane_pair_load(&w->S[92+k]));
+                lane_pair_load(&w->S[92]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[130]),
-                lane_pair_load(&w->S[120+k]));
-        lane_pair_store(&t->Phi[131+k], lanes);
+                lane_pair_load(&w->S[120]));
+        lane_pair_store(&t->Phi[131], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[126]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[128]),
+                lane_pair_load(&w->S[94]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[130]),
+                lane_pair_load(&w->S[122]));
+        lane_pair_store(&t->Phi[133], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[126]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[128]),
+                lane_pair_load(&w->S[96]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[130]),
+                lane_pair_load(&w->S[124]));
+        lane_pair_store(&t->Phi[135], lanes);
     }
     for (k = 0; k < 7; ++k) {
         t->Phi[137+k] = fh_pairs[132]*w->S[70+k];
@@ -2291,11 +2495,23 @@ ENU_DOPPLER18_TWIN_BLOCK void horner_transition(enu_doppler18_twin_transition *r
     for (k = 0; k < 1; ++k) {
         t->Phi[144+k] = fh_pairs[132]*w->S[77+k];
     }
-    for (k = 0; k < 6; k += 2) {
+    {
         lane_pair lanes;
         lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[132]),
-                lane_pair_load(&w->S[78+k]));
-        lane_pair_store(&t->Phi[148+k], lanes);
+                lane_pair_load(&w->S[78]));
+        lane_pair_store(&t->Phi[148], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[132]),
+                lane_pair_load(&w->S[80]));
+        lane_pair_store(&t->Phi[150], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[132]),
+                lane_pair_load(&w->S[82]));
+        lane_pair_store(&t->Phi[152], lanes);
     }
     t->Phi[11] = t->Phi[11] + fh_pairs[14]*w->S[126];
     t->Phi[12] = t->Phi[12] + fh_pairs[16]*w->S[127];

@@ -934,41 +934,77 @@ GPS_PSEUDORANGE11_BLOCK void horner_saturated_into_S(gps_pseudorange11_discretiz
                 lane_pair_load(&w->term[1][40+k]));
         lane_pair_store(&w->S[50+k], lanes);
     }
-    for (k = 0; k < 4; k += 2) {
+    {
         lane_pair lanes;
         lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[48]),
-                lane_pair_load(&w->term[1][64+k]));
+                lane_pair_load(&w->term[1][64]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
-                lane_pair_load(&w->term[1][68+k]));
-        lane_pair_store(&w->S[60+k], lanes);
+                lane_pair_load(&w->term[1][68]));
+        lane_pair_store(&w->S[60], lanes);
         lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[52]),
-                lane_pair_load(&w->term[1][60+k]));
+                lane_pair_load(&w->term[1][60]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
-                lane_pair_load(&w->term[1][68+k]));
-        lane_pair_store(&w->S[64+k], lanes);
+                lane_pair_load(&w->term[1][68]));
+        lane_pair_store(&w->S[64], lanes);
         lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]),
-                lane_pair_load(&w->term[1][60+k]));
+                lane_pair_load(&w->term[1][60]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
-                lane_pair_load(&w->term[1][64+k]));
-        lane_pair_store(&w->S[68+k], lanes);
-        lanes = lane_pair_load(&w->S[35+k]);
+                lane_pair_load(&w->term[1][64]));
+        lane_pair_store(&w->S[68], lanes);
+        lanes = lane_pair_load(&w->S[35]);
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
-                lane_pair_load(&w->term[1][64+k]));
+                lane_pair_load(&w->term[1][64]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
-                lane_pair_load(&w->term[1][68+k]));
-        lane_pair_store(&w->S[35+k], lanes);
-        lanes = lane_pair_load(&w->S[45+k]);
+                lane_pair_load(&w->term[1][68]));
+        lane_pair_store(&w->S[35], lanes);
+        lanes = lane_pair_load(&w->S[45]);
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
-                lane_pair_load(&w->term[1][60+k]));
+                lane_pair_load(&w->term[1][60]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
-                lane_pair_load(&w->term[1][68+k]));
-        lane_pair_store(&w->S[45+k], lanes);
-        lanes = lane_pair_load(&w->S[55+k]);
+                lane_pair_load(&w->term[1][68]));
+        lane_pair_store(&w->S[45], lanes);
+        lanes = lane_pair_load(&w->S[55]);
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
-                lane_pair_load(&w->term[1][60+k]));
+                lane_pair_load(&w->term[1][60]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
-                lane_pair_load(&w->term[1][64+k]));
-        lane_pair_store(&w->S[55+k], lanes);
+                lane_pair_load(&w->term[1][64]));
+        lane_pair_store(&w->S[55], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->term[1][66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->term[1][70]));
+        lane_pair_store(&w->S[62], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[52]),
+                lane_pair_load(&w->term[1][62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->term[1][70]));
+        lane_pair_store(&w->S[66], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]),
+                lane_pair_load(&w->term[1][62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->term[1][66]));
+        lane_pair_store(&w->S[70], lanes);
+        lanes = lane_pair_load(&w->S[37]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->term[1][66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->term[1][70]));
+        lane_pair_store(&w->S[37], lanes);
+        lanes = lane_pair_load(&w->S[47]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->term[1][62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->term[1][70]));
+        lane_pair_store(&w->S[47], lanes);
+        lanes = lane_pair_load(&w->S[57]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->term[1][62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->term[1][66]));
+        lane_pair_store(&w->S[57], lanes);
     }
     w->S[0] = w->S[0] + c_out;
     w->S[11] = w->S[11] + c_out;
@@ -1028,41 +1064,71 @@ GPS_PSEUDORANGE11_BLOCK void horner_saturated_into_term(gps_pseudorange11_discre
                 lane_pair_load(&w->S[40+k]));
         lane_pair_store(&w->term[1][50+k], lanes);
     }
-    for (k = 0; k < 4; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[48]),
-                lane_pair_load(&w->S[64+k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[48]), lane_pair_load(&w->S[64]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
-                lane_pair_load(&w->S[68+k]));
-        lane_pair_store(&w->term[1][60+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[52]),
-                lane_pair_load(&w->S[60+k]));
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&w->term[1][60], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[52]), lane_pair_load(&w->S[60]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
-                lane_pair_load(&w->S[68+k]));
-        lane_pair_store(&w->term[1][64+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]),
-                lane_pair_load(&w->S[60+k]));
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&w->term[1][64], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]), lane_pair_load(&w->S[60]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
-                lane_pair_load(&w->S[64+k]));
-        lane_pair_store(&w->term[1][68+k], lanes);
-        lanes = lane_pair_load(&w->term[1][35+k]);
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&w->term[1][68], lanes);
+        lanes = lane_pair_load(&w->term[1][35]);
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
-                lane_pair_load(&w->S[64+k]));
+                lane_pair_load(&w->S[64]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
-                lane_pair_load(&w->S[68+k]));
-        lane_pair_store(&w->term[1][35+k], lanes);
-        lanes = lane_pair_load(&w->term[1][45+k]);
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&w->term[1][35], lanes);
+        lanes = lane_pair_load(&w->term[1][45]);
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
-                lane_pair_load(&w->S[60+k]));
+                lane_pair_load(&w->S[60]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
-                lane_pair_load(&w->S[68+k]));
-        lane_pair_store(&w->term[1][45+k], lanes);
-        lanes = lane_pair_load(&w->term[1][55+k]);
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&w->term[1][45], lanes);
+        lanes = lane_pair_load(&w->term[1][55]);
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
-                lane_pair_load(&w->S[60+k]));
+                lane_pair_load(&w->S[60]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
-                lane_pair_load(&w->S[64+k]));
-        lane_pair_store(&w->term[1][55+k], lanes);
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&w->term[1][55], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[48]), lane_pair_load(&w->S[66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&w->term[1][62], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[52]), lane_pair_load(&w->S[62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&w->term[1][66], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]), lane_pair_load(&w->S[62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&w->term[1][70], lanes);
+        lanes = lane_pair_load(&w->term[1][37]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&w->term[1][37], lanes);
+        lanes = lane_pair_load(&w->term[1][47]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->S[62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&w->term[1][47], lanes);
+        lanes = lane_pair_load(&w->term[1][57]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&w->term[1][57], lanes);
     }
     w->term[1][0] = w->term[1][0] + c_out;
     w->term[1][11] = w->term[1][11] + c_out;
@@ -1122,41 +1188,71 @@ GPS_PSEUDORANGE11_BLOCK void horner_first_into_term(gps_pseudorange11_discretize
                 lane_pair_load(&w->S[40+k]));
         lane_pair_store(&w->term[1][50+k], lanes);
     }
-    for (k = 0; k < 4; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[48]),
-                lane_pair_load(&w->S[64+k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[48]), lane_pair_load(&w->S[64]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
-                lane_pair_load(&w->S[68+k]));
-        lane_pair_store(&w->term[1][60+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[52]),
-                lane_pair_load(&w->S[60+k]));
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&w->term[1][60], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[52]), lane_pair_load(&w->S[60]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
-                lane_pair_load(&w->S[68+k]));
-        lane_pair_store(&w->term[1][64+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]),
-                lane_pair_load(&w->S[60+k]));
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&w->term[1][64], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]), lane_pair_load(&w->S[60]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
-                lane_pair_load(&w->S[64+k]));
-        lane_pair_store(&w->term[1][68+k], lanes);
-        lanes = lane_pair_load(&w->term[1][35+k]);
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&w->term[1][68], lanes);
+        lanes = lane_pair_load(&w->term[1][35]);
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
-                lane_pair_load(&w->S[64+k]));
+                lane_pair_load(&w->S[64]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
-                lane_pair_load(&w->S[68+k]));
-        lane_pair_store(&w->term[1][35+k], lanes);
-        lanes = lane_pair_load(&w->term[1][45+k]);
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&w->term[1][35], lanes);
+        lanes = lane_pair_load(&w->term[1][45]);
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
-                lane_pair_load(&w->S[60+k]));
+                lane_pair_load(&w->S[60]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
-                lane_pair_load(&w->S[68+k]));
-        lane_pair_store(&w->term[1][45+k], lanes);
-        lanes = lane_pair_load(&w->term[1][55+k]);
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&w->term[1][45], lanes);
+        lanes = lane_pair_load(&w->term[1][55]);
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
-                lane_pair_load(&w->S[60+k]));
+                lane_pair_load(&w->S[60]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
-                lane_pair_load(&w->S[64+k]));
-        lane_pair_store(&w->term[1][55+k], lanes);
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&w->term[1][55], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[48]), lane_pair_load(&w->S[66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&w->term[1][62], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[52]), lane_pair_load(&w->S[62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&w->term[1][66], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]), lane_pair_load(&w->S[62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&w->term[1][70], lanes);
+        lanes = lane_pair_load(&w->term[1][37]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&w->term[1][37], lanes);
+        lanes = lane_pair_load(&w->term[1][47]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->S[62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&w->term[1][47], lanes);
+        lanes = lane_pair_load(&w->term[1][57]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&w->term[1][57], lanes);
     }
     w->term[1][0] = w->term[1][0] + c_out;
     w->term[1][11] = w->term[1][11] + c_out;
@@ -1220,41 +1316,77 @@ GPS_PSEUDORANGE11_BLOCK void horner_last_into_S(gps_pseudorange11_discretize_scr
                 lane_pair_load(&w->term[1][40+k]));
         lane_pair_store(&w->S[50+k], lanes);
     }
-    for (k = 0; k < 4; k += 2) {
+    {
         lane_pair lanes;
         lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[48]),
-                lane_pair_load(&w->term[1][64+k]));
+                lane_pair_load(&w->term[1][64]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
-                lane_pair_load(&w->term[1][68+k]));
-        lane_pair_store(&w->S[60+k], lanes);
+                lane_pair_load(&w->term[1][68]));
+        lane_pair_store(&w->S[60], lanes);
         lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[52]),
-                lane_pair_load(&w->term[1][60+k]));
+                lane_pair_load(&w->term[1][60]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
-                lane_pair_load(&w->term[1][68+k]));
-        lane_pair_store(&w->S[64+k], lanes);
+                lane_pair_load(&w->term[1][68]));
+        lane_pair_store(&w->S[64], lanes);
         lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]),
-                lane_pair_load(&w->term[1][60+k]));
+                lane_pair_load(&w->term[1][60]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
-                lane_pair_load(&w->term[1][64+k]));
-        lane_pair_store(&w->S[68+k], lanes);
-        lanes = lane_pair_load(&w->S[35+k]);
+                lane_pair_load(&w->term[1][64]));
+        lane_pair_store(&w->S[68], lanes);
+        lanes = lane_pair_load(&w->S[35]);
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
-                lane_pair_load(&w->term[1][64+k]));
+                lane_pair_load(&w->term[1][64]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
-                lane_pair_load(&w->term[1][68+k]));
-        lane_pair_store(&w->S[35+k], lanes);
-        lanes = lane_pair_load(&w->S[45+k]);
+                lane_pair_load(&w->term[1][68]));
+        lane_pair_store(&w->S[35], lanes);
+        lanes = lane_pair_load(&w->S[45]);
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
-                lane_pair_load(&w->term[1][60+k]));
+                lane_pair_load(&w->term[1][60]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
-                lane_pair_load(&w->term[1][68+k]));
-        lane_pair_store(&w->S[45+k], lanes);
-        lanes = lane_pair_load(&w->S[55+k]);
+                lane_pair_load(&w->term[1][68]));
+        lane_pair_store(&w->S[45], lanes);
+        lanes = lane_pair_load(&w->S[55]);
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
-                lane_pair_load(&w->term[1][60+k]));
+                lane_pair_load(&w->term[1][60]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
-                lane_pair_load(&w->term[1][64+k]));
-        lane_pair_store(&w->S[55+k], lanes);
+                lane_pair_load(&w->term[1][64]));
+        lane_pair_store(&w->S[55], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->term[1][66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->term[1][70]));
+        lane_pair_store(&w->S[62], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[52]),
+                lane_pair_load(&w->term[1][62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->term[1][70]));
+        lane_pair_store(&w->S[66], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]),
+                lane_pair_load(&w->term[1][62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->term[1][66]));
+        lane_pair_store(&w->S[70], lanes);
+        lanes = lane_pair_load(&w->S[37]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->term[1][66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->term[1][70]));
+        lane_pair_store(&w->S[37], lanes);
+        lanes = lane_pair_load(&w->S[47]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->term[1][62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->term[1][70]));
+        lane_pair_store(&w->S[47], lanes);
+        lanes = lane_pair_load(&w->S[57]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->term[1][62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->term[1][66]));
+        lane_pair_store(&w->S[57], lanes);
     }
     w->S[0] = w->S[0] + c_out;
     w->S[11] = w->S[11] + c_out;
@@ -1288,26 +1420,47 @@ GPS_PSEUDORANGE11_BLOCK void horner_transition(gps_pseudorange11_transition *res
         t->Phi[57+k] = fh_pairs[52]*w->S[61+k] + fh_pairs[54]*w->S[69+k];
         t->Phi[60+k] = fh_pairs[56]*w->S[61+k] + fh_pairs[58]*w->S[65+k];
     }
-    for (k = 0; k < 4; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_load(&t->Phi[32+k]);
+        lanes = lane_pair_load(&t->Phi[32]);
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
-                lane_pair_load(&w->S[64+k]));
+                lane_pair_load(&w->S[64]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
-                lane_pair_load(&w->S[68+k]));
-        lane_pair_store(&t->Phi[32+k], lanes);
-        lanes = lane_pair_load(&t->Phi[41+k]);
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[32], lanes);
+        lanes = lane_pair_load(&t->Phi[41]);
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
-                lane_pair_load(&w->S[60+k]));
+                lane_pair_load(&w->S[60]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
-                lane_pair_load(&w->S[68+k]));
-        lane_pair_store(&t->Phi[41+k], lanes);
-        lanes = lane_pair_load(&t->Phi[50+k]);
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[41], lanes);
+        lanes = lane_pair_load(&t->Phi[50]);
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
-                lane_pair_load(&w->S[60+k]));
+                lane_pair_load(&w->S[60]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
-                lane_pair_load(&w->S[64+k]));
-        lane_pair_store(&t->Phi[50+k], lanes);
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[50], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_load(&t->Phi[34]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[34], lanes);
+        lanes = lane_pair_load(&t->Phi[43]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->S[62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[43], lanes);
+        lanes = lane_pair_load(&t->Phi[52]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[52], lanes);
     }
     t->Phi[64] = w->S[72]*fh_pairs[60];
     t->Phi[63] = 0;

@@ -1345,154 +1345,281 @@ NED_DOPPLER13_REDUCED_BLOCK void horner_transition(ned_doppler13_reduced_transit
 {
     const ned_doppler13_reduced_scalar one = 1.0;
     const ned_doppler13_reduced_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
-    int k;
-    for (k = 0; k < 6; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[8+k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[8]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
-                lane_pair_load(&w->S[16+k]));
+                lane_pair_load(&w->S[16]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
-                lane_pair_load(&w->S[32+k]));
+                lane_pair_load(&w->S[32]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
-                lane_pair_load(&w->S[40+k]));
-        lane_pair_store(&t->Phi[k], lanes);
+                lane_pair_load(&w->S[40]));
+        lane_pair_store(&t->Phi[0], lanes);
     }
-    for (k = 0; k < 2; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
-                lane_pair_load(&w->S[14+k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[10]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
-                lane_pair_load(&w->S[22+k]));
+                lane_pair_load(&w->S[18]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
-                lane_pair_load(&w->S[38+k]));
+                lane_pair_load(&w->S[34]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
-                lane_pair_load(&w->S[46+k]));
-        lane_pair_store(&t->Phi[8+k], lanes);
+                lane_pair_load(&w->S[42]));
+        lane_pair_store(&t->Phi[2], lanes);
     }
-    for (k = 0; k < 6; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[16]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[12]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[20]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[36]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[44]));
+        lane_pair_store(&t->Phi[4], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[14]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[46]));
+        lane_pair_store(&t->Phi[8], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[16]), lane_pair_load(&w->S[0]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[18]),
-                lane_pair_load(&w->S[16+k]));
+                lane_pair_load(&w->S[16]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
-                lane_pair_load(&w->S[24+k]));
-        lane_pair_store(&t->Phi[10+k], lanes);
+                lane_pair_load(&w->S[24]));
+        lane_pair_store(&t->Phi[10], lanes);
     }
-    for (k = 0; k < 2; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[16]),
-                lane_pair_load(&w->S[6+k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[16]), lane_pair_load(&w->S[2]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[18]),
-                lane_pair_load(&w->S[22+k]));
+                lane_pair_load(&w->S[18]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
-                lane_pair_load(&w->S[30+k]));
-        lane_pair_store(&t->Phi[18+k], lanes);
+                lane_pair_load(&w->S[26]));
+        lane_pair_store(&t->Phi[12], lanes);
     }
-    for (k = 0; k < 6; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[30]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[16]), lane_pair_load(&w->S[4]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[18]),
+                lane_pair_load(&w->S[20]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->S[28]));
+        lane_pair_store(&t->Phi[14], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[16]), lane_pair_load(&w->S[6]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[18]),
+                lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->S[30]));
+        lane_pair_store(&t->Phi[18], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[30]), lane_pair_load(&w->S[0]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[32]),
-                lane_pair_load(&w->S[8+k]));
+                lane_pair_load(&w->S[8]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
-                lane_pair_load(&w->S[32+k]));
+                lane_pair_load(&w->S[32]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
-                lane_pair_load(&w->S[40+k]));
-        lane_pair_store(&t->Phi[20+k], lanes);
+                lane_pair_load(&w->S[40]));
+        lane_pair_store(&t->Phi[20], lanes);
     }
-    for (k = 0; k < 2; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[30]),
-                lane_pair_load(&w->S[6+k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[30]), lane_pair_load(&w->S[2]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[32]),
-                lane_pair_load(&w->S[14+k]));
+                lane_pair_load(&w->S[10]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
-                lane_pair_load(&w->S[38+k]));
+                lane_pair_load(&w->S[34]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
-                lane_pair_load(&w->S[46+k]));
-        lane_pair_store(&t->Phi[28+k], lanes);
+                lane_pair_load(&w->S[42]));
+        lane_pair_store(&t->Phi[22], lanes);
     }
-    for (k = 0; k < 6; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[46]),
-                lane_pair_load(&w->S[8+k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[30]), lane_pair_load(&w->S[4]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[32]),
+                lane_pair_load(&w->S[12]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->S[36]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->S[44]));
+        lane_pair_store(&t->Phi[24], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[30]), lane_pair_load(&w->S[6]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[32]),
+                lane_pair_load(&w->S[14]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->S[46]));
+        lane_pair_store(&t->Phi[28], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[46]), lane_pair_load(&w->S[8]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
-                lane_pair_load(&w->S[16+k]));
+                lane_pair_load(&w->S[16]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
-                lane_pair_load(&w->S[24+k]));
+                lane_pair_load(&w->S[24]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[52]),
-                lane_pair_load(&w->S[32+k]));
+                lane_pair_load(&w->S[32]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
-                lane_pair_load(&w->S[40+k]));
-        lane_pair_store(&t->Phi[30+k], lanes);
+                lane_pair_load(&w->S[40]));
+        lane_pair_store(&t->Phi[30], lanes);
     }
-    for (k = 0; k < 2; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[46]),
-                lane_pair_load(&w->S[14+k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[46]), lane_pair_load(&w->S[10]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
-                lane_pair_load(&w->S[22+k]));
+                lane_pair_load(&w->S[18]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
-                lane_pair_load(&w->S[30+k]));
+                lane_pair_load(&w->S[26]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[52]),
-                lane_pair_load(&w->S[38+k]));
+                lane_pair_load(&w->S[34]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
-                lane_pair_load(&w->S[46+k]));
-        lane_pair_store(&t->Phi[38+k], lanes);
+                lane_pair_load(&w->S[42]));
+        lane_pair_store(&t->Phi[32], lanes);
     }
-    for (k = 0; k < 6; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[46]), lane_pair_load(&w->S[12]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->S[20]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[28]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[52]),
+                lane_pair_load(&w->S[36]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->S[44]));
+        lane_pair_store(&t->Phi[34], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[46]), lane_pair_load(&w->S[14]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[30]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[52]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->S[46]));
+        lane_pair_store(&t->Phi[38], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]), lane_pair_load(&w->S[0]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
-                lane_pair_load(&w->S[16+k]));
+                lane_pair_load(&w->S[16]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
-                lane_pair_load(&w->S[24+k]));
+                lane_pair_load(&w->S[24]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
-                lane_pair_load(&w->S[32+k]));
+                lane_pair_load(&w->S[32]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
-                lane_pair_load(&w->S[40+k]));
-        lane_pair_store(&t->Phi[40+k], lanes);
+                lane_pair_load(&w->S[40]));
+        lane_pair_store(&t->Phi[40], lanes);
     }
-    for (k = 0; k < 2; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]),
-                lane_pair_load(&w->S[6+k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]), lane_pair_load(&w->S[2]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
-                lane_pair_load(&w->S[22+k]));
+                lane_pair_load(&w->S[18]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
-                lane_pair_load(&w->S[30+k]));
+                lane_pair_load(&w->S[26]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
-                lane_pair_load(&w->S[38+k]));
+                lane_pair_load(&w->S[34]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
-                lane_pair_load(&w->S[46+k]));
-        lane_pair_store(&t->Phi[48+k], lanes);
+                lane_pair_load(&w->S[42]));
+        lane_pair_store(&t->Phi[42], lanes);
     }
-    for (k = 0; k < 6; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[66]),
-                lane_pair_load(&w->S[24+k]));
-        lane_pair_store(&t->Phi[50+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]), lane_pair_load(&w->S[4]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->S[20]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[28]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[36]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[44]));
+        lane_pair_store(&t->Phi[44], lanes);
     }
-    for (k = 0; k < 2; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[66]),
-                lane_pair_load(&w->S[30+k]));
-        lane_pair_store(&t->Phi[58+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]), lane_pair_load(&w->S[6]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[30]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[46]));
+        lane_pair_store(&t->Phi[48], lanes);
     }
-    for (k = 0; k < 6; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[68]),
-                lane_pair_load(&w->S[32+k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[66]), lane_pair_load(&w->S[24]));
+        lane_pair_store(&t->Phi[50], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[66]), lane_pair_load(&w->S[26]));
+        lane_pair_store(&t->Phi[52], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[66]), lane_pair_load(&w->S[28]));
+        lane_pair_store(&t->Phi[54], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[66]), lane_pair_load(&w->S[30]));
+        lane_pair_store(&t->Phi[58], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[68]), lane_pair_load(&w->S[32]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
-                lane_pair_load(&w->S[40+k]));
-        lane_pair_store(&t->Phi[60+k], lanes);
+                lane_pair_load(&w->S[40]));
+        lane_pair_store(&t->Phi[60], lanes);
     }
-    for (k = 0; k < 2; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[68]),
-                lane_pair_load(&w->S[38+k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[68]), lane_pair_load(&w->S[34]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
-                lane_pair_load(&w->S[46+k]));
-        lane_pair_store(&t->Phi[69+k], lanes);
+                lane_pair_load(&w->S[42]));
+        lane_pair_store(&t->Phi[62], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[68]), lane_pair_load(&w->S[36]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->S[44]));
+        lane_pair_store(&t->Phi[64], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[68]), lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->S[46]));
+        lane_pair_store(&t->Phi[69], lanes);
     }
     t->Phi[8] = t->Phi[8] + fh_pairs[12]*w->S[56];
     t->Phi[9] = t->Phi[9] + fh_pairs[14]*w->S[57];

@@ -1657,116 +1657,302 @@ NED_DOPPLER18_TWIN_BLOCK void horner_transition(ned_doppler18_twin_transition *r
 {
     const ned_doppler18_twin_scalar one = 1.0;
     const ned_doppler18_twin_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
-    int k;
-    for (k = 0; k < 6; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
-                lane_pair_load(&w->S[12+k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[12]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
-                lane_pair_load(&w->S[24+k]));
+                lane_pair_load(&w->S[24]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
-                lane_pair_load(&w->S[48+k]));
+                lane_pair_load(&w->S[48]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
-                lane_pair_load(&w->S[60+k]));
-        lane_pair_store(&t->Phi[k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
-                lane_pair_load(&w->S[18+k]));
+                lane_pair_load(&w->S[60]));
+        lane_pair_store(&t->Phi[0], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[18]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
-                lane_pair_load(&w->S[30+k]));
+                lane_pair_load(&w->S[30]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
-                lane_pair_load(&w->S[54+k]));
+                lane_pair_load(&w->S[54]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
-                lane_pair_load(&w->S[66+k]));
-        lane_pair_store(&t->Phi[9+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[k]));
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[9], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[0]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
-                lane_pair_load(&w->S[24+k]));
+                lane_pair_load(&w->S[24]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
-                lane_pair_load(&w->S[36+k]));
-        lane_pair_store(&t->Phi[15+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]),
-                lane_pair_load(&w->S[6+k]));
+                lane_pair_load(&w->S[36]));
+        lane_pair_store(&t->Phi[15], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[6]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
-                lane_pair_load(&w->S[30+k]));
+                lane_pair_load(&w->S[30]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
-                lane_pair_load(&w->S[42+k]));
-        lane_pair_store(&t->Phi[24+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[k]));
+                lane_pair_load(&w->S[42]));
+        lane_pair_store(&t->Phi[24], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[0]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
-                lane_pair_load(&w->S[12+k]));
+                lane_pair_load(&w->S[12]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
-                lane_pair_load(&w->S[48+k]));
+                lane_pair_load(&w->S[48]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
-                lane_pair_load(&w->S[60+k]));
-        lane_pair_store(&t->Phi[30+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]),
-                lane_pair_load(&w->S[6+k]));
+                lane_pair_load(&w->S[60]));
+        lane_pair_store(&t->Phi[30], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[6]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
-                lane_pair_load(&w->S[18+k]));
+                lane_pair_load(&w->S[18]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
-                lane_pair_load(&w->S[54+k]));
+                lane_pair_load(&w->S[54]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
-                lane_pair_load(&w->S[66+k]));
-        lane_pair_store(&t->Phi[39+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[58]),
-                lane_pair_load(&w->S[12+k]));
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[39], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[58]), lane_pair_load(&w->S[12]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
-                lane_pair_load(&w->S[24+k]));
+                lane_pair_load(&w->S[24]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
-                lane_pair_load(&w->S[36+k]));
+                lane_pair_load(&w->S[36]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
-                lane_pair_load(&w->S[48+k]));
+                lane_pair_load(&w->S[48]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
-                lane_pair_load(&w->S[60+k]));
-        lane_pair_store(&t->Phi[45+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[58]),
-                lane_pair_load(&w->S[18+k]));
+                lane_pair_load(&w->S[60]));
+        lane_pair_store(&t->Phi[45], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[58]), lane_pair_load(&w->S[18]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
-                lane_pair_load(&w->S[30+k]));
+                lane_pair_load(&w->S[30]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
-                lane_pair_load(&w->S[42+k]));
+                lane_pair_load(&w->S[42]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
-                lane_pair_load(&w->S[54+k]));
+                lane_pair_load(&w->S[54]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
-                lane_pair_load(&w->S[66+k]));
-        lane_pair_store(&t->Phi[54+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[k]));
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[54], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[0]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
-                lane_pair_load(&w->S[24+k]));
+                lane_pair_load(&w->S[24]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
-                lane_pair_load(&w->S[36+k]));
+                lane_pair_load(&w->S[36]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
-                lane_pair_load(&w->S[48+k]));
+                lane_pair_load(&w->S[48]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[82]),
-                lane_pair_load(&w->S[60+k]));
-        lane_pair_store(&t->Phi[60+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]),
-                lane_pair_load(&w->S[6+k]));
+                lane_pair_load(&w->S[60]));
+        lane_pair_store(&t->Phi[60], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[6]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
-                lane_pair_load(&w->S[30+k]));
+                lane_pair_load(&w->S[30]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
-                lane_pair_load(&w->S[42+k]));
+                lane_pair_load(&w->S[42]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
-                lane_pair_load(&w->S[54+k]));
+                lane_pair_load(&w->S[54]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[82]),
-                lane_pair_load(&w->S[66+k]));
-        lane_pair_store(&t->Phi[69+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[90]),
-                lane_pair_load(&w->S[36+k]));
-        lane_pair_store(&t->Phi[75+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[90]),
-                lane_pair_load(&w->S[42+k]));
-        lane_pair_store(&t->Phi[84+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[92]),
-                lane_pair_load(&w->S[48+k]));
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[69], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[90]), lane_pair_load(&w->S[36]));
+        lane_pair_store(&t->Phi[75], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[90]), lane_pair_load(&w->S[42]));
+        lane_pair_store(&t->Phi[84], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[92]), lane_pair_load(&w->S[48]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
-                lane_pair_load(&w->S[60+k]));
-        lane_pair_store(&t->Phi[90+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[92]),
-                lane_pair_load(&w->S[54+k]));
+                lane_pair_load(&w->S[60]));
+        lane_pair_store(&t->Phi[90], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[92]), lane_pair_load(&w->S[54]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
-                lane_pair_load(&w->S[66+k]));
-        lane_pair_store(&t->Phi[100+k], lanes);
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[100], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[14]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[62]));
+        lane_pair_store(&t->Phi[2], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[20]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[56]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[11], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[2]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[38]));
+        lane_pair_store(&t->Phi[17], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[8]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[44]));
+        lane_pair_store(&t->Phi[26], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[2]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[14]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[62]));
+        lane_pair_store(&t->Phi[32], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[8]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[20]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[56]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[41], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[58]), lane_pair_load(&w->S[14]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[62]));
+        lane_pair_store(&t->Phi[47], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[58]), lane_pair_load(&w->S[20]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[44]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[56]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[56], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[2]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[82]),
+                lane_pair_load(&w->S[62]));
+        lane_pair_store(&t->Phi[62], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[8]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[44]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[56]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[82]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[71], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[90]), lane_pair_load(&w->S[38]));
+        lane_pair_store(&t->Phi[77], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[90]), lane_pair_load(&w->S[44]));
+        lane_pair_store(&t->Phi[86], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[92]), lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->S[62]));
+        lane_pair_store(&t->Phi[92], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[92]), lane_pair_load(&w->S[56]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[102], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[16]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[28]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[4], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[34]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[58]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[13], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[4]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[28]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[40]));
+        lane_pair_store(&t->Phi[19], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[34]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[46]));
+        lane_pair_store(&t->Phi[28], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[4]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[16]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[34], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[58]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[43], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[58]), lane_pair_load(&w->S[16]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[28]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[40]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[49], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[58]), lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[34]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[46]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[58]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[58], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[4]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[28]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[40]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[82]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[64], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[34]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[46]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[58]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[82]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[73], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[90]), lane_pair_load(&w->S[40]));
+        lane_pair_store(&t->Phi[79], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[90]), lane_pair_load(&w->S[46]));
+        lane_pair_store(&t->Phi[88], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[92]), lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[94], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[92]), lane_pair_load(&w->S[58]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[104], lanes);
     }
     t->Phi[9] = t->Phi[9] + fh_pairs[14]*w->S[84];
     t->Phi[10] = t->Phi[10] + fh_pairs[16]*w->S[85];

@@ -2482,116 +2482,321 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_tra
 {
     const ned_doppler32_augmented_scalar one = 1.0;
     const ned_doppler32_augmented_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
-    int k;
-    for (k = 0; k < 6; k += 2) {
+    {
         lane_pair lanes;
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
-                lane_pair_load(&w->S[12+k]));
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[12]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
-                lane_pair_load(&w->S[24+k]));
+                lane_pair_load(&w->S[24]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
-                lane_pair_load(&w->S[48+k]));
+                lane_pair_load(&w->S[48]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
-                lane_pair_load(&w->S[60+k]));
-        lane_pair_store(&t->Phi[k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
-                lane_pair_load(&w->S[18+k]));
+                lane_pair_load(&w->S[60]));
+        lane_pair_store(&t->Phi[0], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[18]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
-                lane_pair_load(&w->S[30+k]));
+                lane_pair_load(&w->S[30]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
-                lane_pair_load(&w->S[54+k]));
+                lane_pair_load(&w->S[54]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
-                lane_pair_load(&w->S[66+k]));
-        lane_pair_store(&t->Phi[9+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[k]));
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[9], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[0]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
-                lane_pair_load(&w->S[24+k]));
+                lane_pair_load(&w->S[24]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
-                lane_pair_load(&w->S[36+k]));
-        lane_pair_store(&t->Phi[27+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]),
-                lane_pair_load(&w->S[6+k]));
+                lane_pair_load(&w->S[36]));
+        lane_pair_store(&t->Phi[27], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[6]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
-                lane_pair_load(&w->S[30+k]));
+                lane_pair_load(&w->S[30]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
-                lane_pair_load(&w->S[42+k]));
-        lane_pair_store(&t->Phi[36+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[k]));
+                lane_pair_load(&w->S[42]));
+        lane_pair_store(&t->Phi[36], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[0]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
-                lane_pair_load(&w->S[12+k]));
+                lane_pair_load(&w->S[12]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
-                lane_pair_load(&w->S[48+k]));
+                lane_pair_load(&w->S[48]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
-                lane_pair_load(&w->S[60+k]));
-        lane_pair_store(&t->Phi[54+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]),
-                lane_pair_load(&w->S[6+k]));
+                lane_pair_load(&w->S[60]));
+        lane_pair_store(&t->Phi[54], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[6]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
-                lane_pair_load(&w->S[18+k]));
+                lane_pair_load(&w->S[18]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
-                lane_pair_load(&w->S[54+k]));
+                lane_pair_load(&w->S[54]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
-                lane_pair_load(&w->S[66+k]));
-        lane_pair_store(&t->Phi[63+k], lanes);
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[63], lanes);
         lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[112]),
-                lane_pair_load(&w->S[12+k]));
+                lane_pair_load(&w->S[12]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
-                lane_pair_load(&w->S[24+k]));
+                lane_pair_load(&w->S[24]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[116]),
-                lane_pair_load(&w->S[36+k]));
+                lane_pair_load(&w->S[36]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[118]),
-                lane_pair_load(&w->S[48+k]));
+                lane_pair_load(&w->S[48]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[120]),
-                lane_pair_load(&w->S[60+k]));
-        lane_pair_store(&t->Phi[81+k], lanes);
+                lane_pair_load(&w->S[60]));
+        lane_pair_store(&t->Phi[81], lanes);
         lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[112]),
-                lane_pair_load(&w->S[18+k]));
+                lane_pair_load(&w->S[18]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
-                lane_pair_load(&w->S[30+k]));
+                lane_pair_load(&w->S[30]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[116]),
-                lane_pair_load(&w->S[42+k]));
+                lane_pair_load(&w->S[42]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[118]),
-                lane_pair_load(&w->S[54+k]));
+                lane_pair_load(&w->S[54]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[120]),
-                lane_pair_load(&w->S[66+k]));
-        lane_pair_store(&t->Phi[90+k], lanes);
-        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[134]), lane_pair_load(&w->S[k]));
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[90], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[134]), lane_pair_load(&w->S[0]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[136]),
-                lane_pair_load(&w->S[24+k]));
+                lane_pair_load(&w->S[24]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[138]),
-                lane_pair_load(&w->S[36+k]));
+                lane_pair_load(&w->S[36]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[140]),
-                lane_pair_load(&w->S[48+k]));
+                lane_pair_load(&w->S[48]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[142]),
-                lane_pair_load(&w->S[60+k]));
-        lane_pair_store(&t->Phi[108+k], lanes);
+                lane_pair_load(&w->S[60]));
+        lane_pair_store(&t->Phi[108], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[134]), lane_pair_load(&w->S[6]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[136]),
+                lane_pair_load(&w->S[30]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[138]),
+                lane_pair_load(&w->S[42]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[140]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[142]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[117], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[156]),
+                lane_pair_load(&w->S[36]));
+        lane_pair_store(&t->Phi[135], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[156]),
+                lane_pair_load(&w->S[42]));
+        lane_pair_store(&t->Phi[144], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[158]),
+                lane_pair_load(&w->S[48]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[160]),
+                lane_pair_load(&w->S[60]));
+        lane_pair_store(&t->Phi[162], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[158]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[160]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[172], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[14]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[62]));
+        lane_pair_store(&t->Phi[2], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[20]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[56]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[11], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[2]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[38]));
+        lane_pair_store(&t->Phi[29], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[8]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[44]));
+        lane_pair_store(&t->Phi[38], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[2]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[14]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[62]));
+        lane_pair_store(&t->Phi[56], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[8]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[20]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[56]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[65], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->S[14]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[116]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[118]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[120]),
+                lane_pair_load(&w->S[62]));
+        lane_pair_store(&t->Phi[83], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->S[20]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[116]),
+                lane_pair_load(&w->S[44]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[118]),
+                lane_pair_load(&w->S[56]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[120]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[92], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[134]), lane_pair_load(&w->S[2]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[136]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[138]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[140]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[142]),
+                lane_pair_load(&w->S[62]));
+        lane_pair_store(&t->Phi[110], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[134]), lane_pair_load(&w->S[8]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[136]),
+                lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[138]),
+                lane_pair_load(&w->S[44]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[140]),
+                lane_pair_load(&w->S[56]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[142]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[119], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[156]),
+                lane_pair_load(&w->S[38]));
+        lane_pair_store(&t->Phi[137], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[156]),
+                lane_pair_load(&w->S[44]));
+        lane_pair_store(&t->Phi[146], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[158]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[160]),
+                lane_pair_load(&w->S[62]));
+        lane_pair_store(&t->Phi[164], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[158]),
+                lane_pair_load(&w->S[56]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[160]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[174], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[16]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[28]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[4], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[34]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[58]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[13], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[4]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[28]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[40]));
+        lane_pair_store(&t->Phi[31], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[34]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[46]));
+        lane_pair_store(&t->Phi[40], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[4]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[16]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[58], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[58]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[67], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->S[16]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[28]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[116]),
+                lane_pair_load(&w->S[40]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[118]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[120]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[85], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[34]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[116]),
+                lane_pair_load(&w->S[46]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[118]),
+                lane_pair_load(&w->S[58]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[120]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[94], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[134]), lane_pair_load(&w->S[4]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[136]),
+                lane_pair_load(&w->S[28]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[138]),
+                lane_pair_load(&w->S[40]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[140]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[142]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[112], lanes);
         lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[134]),
-                lane_pair_load(&w->S[6+k]));
+                lane_pair_load(&w->S[10]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[136]),
-                lane_pair_load(&w->S[30+k]));
+                lane_pair_load(&w->S[34]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[138]),
-                lane_pair_load(&w->S[42+k]));
+                lane_pair_load(&w->S[46]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[140]),
-                lane_pair_load(&w->S[54+k]));
+                lane_pair_load(&w->S[58]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[142]),
-                lane_pair_load(&w->S[66+k]));
-        lane_pair_store(&t->Phi[117+k], lanes);
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[121], lanes);
         lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[156]),
-                lane_pair_load(&w->S[36+k]));
-        lane_pair_store(&t->Phi[135+k], lanes);
+                lane_pair_load(&w->S[40]));
+        lane_pair_store(&t->Phi[139], lanes);
         lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[156]),
-                lane_pair_load(&w->S[42+k]));
-        lane_pair_store(&t->Phi[144+k], lanes);
+                lane_pair_load(&w->S[46]));
+        lane_pair_store(&t->Phi[148], lanes);
         lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[158]),
-                lane_pair_load(&w->S[48+k]));
+                lane_pair_load(&w->S[52]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[160]),
-                lane_pair_load(&w->S[60+k]));
-        lane_pair_store(&t->Phi[162+k], lanes);
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[166], lanes);
         lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[158]),
-                lane_pair_load(&w->S[54+k]));
+                lane_pair_load(&w->S[58]));
         lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[160]),
-                lane_pair_load(&w->S[66+k]));
-        lane_pair_store(&t->Phi[172+k], lanes);
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[176], lanes);
     }
     t->Phi[9] = t->Phi[9] + fh_pairs[14]*w->S[84];
     t->Phi[10] = t->Phi[10] + fh_pairs[16]*w->S[85];
