@@ -443,57 +443,87 @@ static const signed char balance_exponent[ENU_DOPPLER18_N_STATES] = { -6, -8, -5
    power of two.  A plan on it that needs a doubling is retaken on rebalanced_norm. */
 static enu_doppler18_scalar balanced_norm(const enu_doppler18_matrices *restrict m)
 {
-    enu_doppler18_scalar v, norm = 0.0;
-    v = fabs(m->F[0]) * 0.25 + fabs(m->F[1]) * 2.0 + fabs(m->F[2]) * 4096.0 + fabs(m->F[3]) *
-            131072.0 + fabs(m->F[4]) * 5.820766091346741e-11 + fabs(m->F[5]) * 5.820766091346741e-11
-            + fabs(m->F[6]) * 5.820766091346741e-11 + fabs(m->F[7]) * 5.820766091346741e-11 +
-            fabs(m->F[8]) * 5.820766091346741e-11 + fabs(m->F[9]) * 5.820766091346741e-11;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[10]) * 4.0 + fabs(m->F[11]) * 8.0 + fabs(m->F[12]) * 4096.0 + fabs(m->F[13]) * 8.0
-            + fabs(m->F[14]) * 524288.0 + fabs(m->F[15]) * 2.3283064365386963e-10 + fabs(m->F[16]) *
-            2.3283064365386963e-10 + fabs(m->F[17]) * 2.3283064365386963e-10 + fabs(m->F[18]) *
-            2.3283064365386963e-10 + fabs(m->F[19]) * 2.3283064365386963e-10 + fabs(m->F[20]) *
-            2.3283064365386963e-10;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[21]) * 0.5 + fabs(m->F[22]) * 0.125 + fabs(m->F[23]) * 512.0 + fabs(m->F[24]) +
-            fabs(m->F[25]) * 65536.0 + fabs(m->F[26]) * 2.9103830456733704e-11 + fabs(m->F[27]) *
-            2.9103830456733704e-11 + fabs(m->F[28]) * 2.9103830456733704e-11 + fabs(m->F[29]) *
-            2.9103830456733704e-11 + fabs(m->F[30]) * 2.9103830456733704e-11 + fabs(m->F[31]) *
-            2.9103830456733704e-11;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[32]) * 0.000244140625 + fabs(m->F[33]) * 0.001953125 + fabs(m->F[34]) +
-            fabs(m->F[35]) * 4.0 + fabs(m->F[36]) * 0.25 + fabs(m->F[37]) * 0.001953125 +
-            fabs(m->F[38]) * 128.0 + fabs(m->F[39]) * 5.684341886080802e-14 + fabs(m->F[40]) *
-            5.684341886080802e-14 + fabs(m->F[41]) * 5.684341886080802e-14;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[42]) * 0.000244140625 + fabs(m->F[43]) * 0.00048828125 + fabs(m->F[44]) * 0.25 +
-            fabs(m->F[45]) + fabs(m->F[46]) * 0.0625 + fabs(m->F[47]) * 0.00048828125 +
-            fabs(m->F[48]) * 32.0 + fabs(m->F[49]) * 1.4210854715202004e-14 + fabs(m->F[50]) *
-            1.4210854715202004e-14 + fabs(m->F[51]) * 1.4210854715202004e-14;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[52]) * 0.00390625 + fabs(m->F[53]) * 0.0009765625 + fabs(m->F[54]) * 4.0 +
-            fabs(m->F[55]) * 16.0 + fabs(m->F[56]) * 0.0078125 + fabs(m->F[57]) * 512.0 +
-            fabs(m->F[58]) * 2.2737367544323206e-13 + fabs(m->F[59]) * 2.2737367544323206e-13 +
-            fabs(m->F[60]) * 2.2737367544323206e-13;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[61]) * 2048.0 + fabs(m->F[62]) * 65536.0;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[63]) * 1.4551915228366852e-11 + fabs(m->F[64]) * 2.842170943040401e-14 +
-            fabs(m->F[65]) * 1.862645149230957e-09;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[66]) * 0.001953125;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[67]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[68]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[69]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[70]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[71]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[72]);
+    enu_doppler18_scalar norm = 0.0;
+    lane_pair lanes;
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[10]), fabs(m->F[21])), lane_pair_of(4.0, 0.5));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[11]), fabs(m->F[22])),
+            lane_pair_of(8.0, 0.125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[12]), fabs(m->F[23])),
+            lane_pair_of(4096.0, 512.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[13]), fabs(m->F[24])),
+            lane_pair_of(8.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[14]), fabs(m->F[25])),
+            lane_pair_of(524288.0, 65536.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[15]), fabs(m->F[26])),
+            lane_pair_of(2.3283064365386963e-10, 2.9103830456733704e-11));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[16]), fabs(m->F[27])),
+            lane_pair_of(2.3283064365386963e-10, 2.9103830456733704e-11));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[17]), fabs(m->F[28])),
+            lane_pair_of(2.3283064365386963e-10, 2.9103830456733704e-11));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[18]), fabs(m->F[29])),
+            lane_pair_of(2.3283064365386963e-10, 2.9103830456733704e-11));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[19]), fabs(m->F[30])),
+            lane_pair_of(2.3283064365386963e-10, 2.9103830456733704e-11));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[20]), fabs(m->F[31])),
+            lane_pair_of(2.3283064365386963e-10, 2.9103830456733704e-11));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[0]), fabs(m->F[32])), lane_pair_of(0.25,
+            0.000244140625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[1]), fabs(m->F[33])),
+            lane_pair_of(2.0, 0.001953125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[2]), fabs(m->F[34])),
+            lane_pair_of(4096.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[3]), fabs(m->F[35])),
+            lane_pair_of(131072.0, 4.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[4]), fabs(m->F[36])),
+            lane_pair_of(5.820766091346741e-11, 0.25));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[5]), fabs(m->F[37])),
+            lane_pair_of(5.820766091346741e-11, 0.001953125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[6]), fabs(m->F[38])),
+            lane_pair_of(5.820766091346741e-11, 128.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[7]), fabs(m->F[39])),
+            lane_pair_of(5.820766091346741e-11, 5.684341886080802e-14));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[8]), fabs(m->F[40])),
+            lane_pair_of(5.820766091346741e-11, 5.684341886080802e-14));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[9]), fabs(m->F[41])),
+            lane_pair_of(5.820766091346741e-11, 5.684341886080802e-14));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[42]), fabs(m->F[52])),
+            lane_pair_of(0.000244140625, 0.00390625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[43]), fabs(m->F[53])),
+            lane_pair_of(0.00048828125, 0.0009765625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[44]), fabs(m->F[54])),
+            lane_pair_of(0.25, 4.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[45]), fabs(m->F[55])),
+            lane_pair_of(1.0, 16.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[46]), fabs(m->F[56])),
+            lane_pair_of(0.0625, 0.0078125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[47]), fabs(m->F[57])),
+            lane_pair_of(0.00048828125, 512.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[48]), fabs(m->F[58])),
+            lane_pair_of(32.0, 2.2737367544323206e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[49]), fabs(m->F[59])),
+            lane_pair_of(1.4210854715202004e-14, 2.2737367544323206e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[50]), fabs(m->F[60])),
+            lane_pair_of(1.4210854715202004e-14, 2.2737367544323206e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[51]), 0.0),
+            lane_pair_of(1.4210854715202004e-14, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[63]), fabs(m->F[61])),
+            lane_pair_of(1.4551915228366852e-11, 2048.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[64]), fabs(m->F[62])),
+            lane_pair_of(2.842170943040401e-14, 65536.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[65]), 0.0),
+            lane_pair_of(1.862645149230957e-09, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[66]), fabs(m->F[67])),
+            lane_pair_of(0.001953125, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[68]), fabs(m->F[69]));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[70]), fabs(m->F[71]));
+    norm = lane_pair_max(lanes, norm);
+    const enu_doppler18_scalar v = fabs(m->F[72]);
     norm = v > norm ? v : norm;
     return norm;
 }
@@ -504,8 +534,11 @@ static enu_doppler18_scalar balanced_norm(const enu_doppler18_matrices *restrict
            balancing
    in powers of two, starting from the fixed D (at the check operating point one sweep finds it a
            fixed
-   point) and stopped at a fixed point; the sums in the reference's order (row by row). */
-static enu_doppler18_scalar rebalanced_norm(const enu_doppler18_matrices *restrict m,
+   point) and stopped at a fixed point; the sums in the reference's order (row by row).
+   Not inlined: it runs only when a doubling is at stake, and inlined, gcc -O2 would keep
+   balanced_norm's |F_ij| on the stack for it on every call (bench/bench_cycle.py: 130
+   instructions at 18 states). */
+ENU_DOPPLER18_BLOCK enu_doppler18_scalar rebalanced_norm(const enu_doppler18_matrices *restrict m,
         enu_doppler18_discretize_scratch *restrict w)
 {
     enu_doppler18_scalar v, norm = 0.0;
@@ -918,967 +951,1708 @@ static int taylor_plan(const enu_doppler18_scalar norm, const enu_doppler18_scal
 ENU_DOPPLER18_BLOCK void horner_input(const enu_doppler18_matrices *restrict m,
         enu_doppler18_discretize_scratch *restrict w, const enu_doppler18_scalar h)
 {
-    w->fh[0] = m->F[0]*h;
-    w->fh[1] = m->F[1]*h;
-    w->fh[2] = m->F[2]*h;
-    w->fh[3] = m->F[3]*h;
-    w->fh[4] = m->F[4]*h;
-    w->fh[5] = m->F[5]*h;
-    w->fh[6] = m->F[6]*h;
-    w->fh[7] = m->F[7]*h;
-    w->fh[8] = m->F[8]*h;
-    w->fh[9] = m->F[9]*h;
-    w->fh[10] = m->F[10]*h;
-    w->fh[11] = m->F[11]*h;
-    w->fh[12] = m->F[12]*h;
-    w->fh[13] = m->F[13]*h;
-    w->fh[14] = m->F[14]*h;
-    w->fh[15] = m->F[15]*h;
-    w->fh[16] = m->F[16]*h;
-    w->fh[17] = m->F[17]*h;
-    w->fh[18] = m->F[18]*h;
-    w->fh[19] = m->F[19]*h;
-    w->fh[20] = m->F[20]*h;
-    w->fh[21] = m->F[21]*h;
-    w->fh[22] = m->F[22]*h;
-    w->fh[23] = m->F[23]*h;
-    w->fh[24] = m->F[24]*h;
-    w->fh[25] = m->F[25]*h;
-    w->fh[26] = m->F[26]*h;
-    w->fh[27] = m->F[27]*h;
-    w->fh[28] = m->F[28]*h;
-    w->fh[29] = m->F[29]*h;
-    w->fh[30] = m->F[30]*h;
-    w->fh[31] = m->F[31]*h;
-    w->fh[32] = m->F[32]*h;
-    w->fh[33] = m->F[33]*h;
-    w->fh[34] = m->F[34]*h;
-    w->fh[35] = m->F[35]*h;
-    w->fh[36] = m->F[36]*h;
-    w->fh[37] = m->F[37]*h;
-    w->fh[38] = m->F[38]*h;
-    w->fh[39] = m->F[39]*h;
-    w->fh[40] = m->F[40]*h;
-    w->fh[41] = m->F[41]*h;
-    w->fh[42] = m->F[42]*h;
-    w->fh[43] = m->F[43]*h;
-    w->fh[44] = m->F[44]*h;
-    w->fh[45] = m->F[45]*h;
-    w->fh[46] = m->F[46]*h;
-    w->fh[47] = m->F[47]*h;
-    w->fh[48] = m->F[48]*h;
-    w->fh[49] = m->F[49]*h;
-    w->fh[50] = m->F[50]*h;
-    w->fh[51] = m->F[51]*h;
-    w->fh[52] = m->F[52]*h;
-    w->fh[53] = m->F[53]*h;
-    w->fh[54] = m->F[54]*h;
-    w->fh[55] = m->F[55]*h;
-    w->fh[56] = m->F[56]*h;
-    w->fh[57] = m->F[57]*h;
-    w->fh[58] = m->F[58]*h;
-    w->fh[59] = m->F[59]*h;
-    w->fh[60] = m->F[60]*h;
-    w->fh[61] = m->F[61]*h;
-    w->fh[62] = m->F[62]*h;
-    w->fh[63] = m->F[63]*h;
-    w->fh[64] = m->F[64]*h;
-    w->fh[65] = m->F[65]*h;
-    w->fh[66] = m->F[66]*h;
-    w->fh[67] = m->F[67]*h;
-    w->fh[68] = m->F[68]*h;
-    w->fh[69] = m->F[69]*h;
-    w->fh[70] = m->F[70]*h;
-    w->fh[71] = m->F[71]*h;
-    w->fh[72] = m->F[72]*h;
+    enu_doppler18_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
+    lane_pair_store(&fh_pairs[0], lane_pair_of(m->F[0]*h, m->F[0]*h));
+    lane_pair_store(&fh_pairs[2], lane_pair_of(m->F[1]*h, m->F[1]*h));
+    lane_pair_store(&fh_pairs[4], lane_pair_of(m->F[2]*h, m->F[2]*h));
+    lane_pair_store(&fh_pairs[6], lane_pair_of(m->F[3]*h, m->F[3]*h));
+    lane_pair_store(&fh_pairs[8], lane_pair_of(m->F[4]*h, m->F[4]*h));
+    lane_pair_store(&fh_pairs[10], lane_pair_of(m->F[5]*h, m->F[5]*h));
+    lane_pair_store(&fh_pairs[12], lane_pair_of(m->F[6]*h, m->F[6]*h));
+    lane_pair_store(&fh_pairs[14], lane_pair_of(m->F[7]*h, m->F[7]*h));
+    lane_pair_store(&fh_pairs[16], lane_pair_of(m->F[8]*h, m->F[8]*h));
+    lane_pair_store(&fh_pairs[18], lane_pair_of(m->F[9]*h, m->F[9]*h));
+    lane_pair_store(&fh_pairs[20], lane_pair_of(m->F[10]*h, m->F[10]*h));
+    lane_pair_store(&fh_pairs[22], lane_pair_of(m->F[11]*h, m->F[11]*h));
+    lane_pair_store(&fh_pairs[24], lane_pair_of(m->F[12]*h, m->F[12]*h));
+    lane_pair_store(&fh_pairs[26], lane_pair_of(m->F[13]*h, m->F[13]*h));
+    lane_pair_store(&fh_pairs[28], lane_pair_of(m->F[14]*h, m->F[14]*h));
+    lane_pair_store(&fh_pairs[30], lane_pair_of(m->F[15]*h, m->F[15]*h));
+    lane_pair_store(&fh_pairs[32], lane_pair_of(m->F[16]*h, m->F[16]*h));
+    lane_pair_store(&fh_pairs[34], lane_pair_of(m->F[17]*h, m->F[17]*h));
+    lane_pair_store(&fh_pairs[36], lane_pair_of(m->F[18]*h, m->F[18]*h));
+    lane_pair_store(&fh_pairs[38], lane_pair_of(m->F[19]*h, m->F[19]*h));
+    lane_pair_store(&fh_pairs[40], lane_pair_of(m->F[20]*h, m->F[20]*h));
+    lane_pair_store(&fh_pairs[42], lane_pair_of(m->F[21]*h, m->F[21]*h));
+    lane_pair_store(&fh_pairs[44], lane_pair_of(m->F[22]*h, m->F[22]*h));
+    lane_pair_store(&fh_pairs[46], lane_pair_of(m->F[23]*h, m->F[23]*h));
+    lane_pair_store(&fh_pairs[48], lane_pair_of(m->F[24]*h, m->F[24]*h));
+    lane_pair_store(&fh_pairs[50], lane_pair_of(m->F[25]*h, m->F[25]*h));
+    lane_pair_store(&fh_pairs[52], lane_pair_of(m->F[26]*h, m->F[26]*h));
+    lane_pair_store(&fh_pairs[54], lane_pair_of(m->F[27]*h, m->F[27]*h));
+    lane_pair_store(&fh_pairs[56], lane_pair_of(m->F[28]*h, m->F[28]*h));
+    lane_pair_store(&fh_pairs[58], lane_pair_of(m->F[29]*h, m->F[29]*h));
+    lane_pair_store(&fh_pairs[60], lane_pair_of(m->F[30]*h, m->F[30]*h));
+    lane_pair_store(&fh_pairs[62], lane_pair_of(m->F[31]*h, m->F[31]*h));
+    lane_pair_store(&fh_pairs[64], lane_pair_of(m->F[32]*h, m->F[32]*h));
+    lane_pair_store(&fh_pairs[66], lane_pair_of(m->F[33]*h, m->F[33]*h));
+    lane_pair_store(&fh_pairs[68], lane_pair_of(m->F[34]*h, m->F[34]*h));
+    lane_pair_store(&fh_pairs[70], lane_pair_of(m->F[35]*h, m->F[35]*h));
+    lane_pair_store(&fh_pairs[72], lane_pair_of(m->F[36]*h, m->F[36]*h));
+    lane_pair_store(&fh_pairs[74], lane_pair_of(m->F[37]*h, m->F[37]*h));
+    lane_pair_store(&fh_pairs[76], lane_pair_of(m->F[38]*h, m->F[38]*h));
+    lane_pair_store(&fh_pairs[78], lane_pair_of(m->F[39]*h, m->F[39]*h));
+    lane_pair_store(&fh_pairs[80], lane_pair_of(m->F[40]*h, m->F[40]*h));
+    lane_pair_store(&fh_pairs[82], lane_pair_of(m->F[41]*h, m->F[41]*h));
+    lane_pair_store(&fh_pairs[84], lane_pair_of(m->F[42]*h, m->F[42]*h));
+    lane_pair_store(&fh_pairs[86], lane_pair_of(m->F[43]*h, m->F[43]*h));
+    lane_pair_store(&fh_pairs[88], lane_pair_of(m->F[44]*h, m->F[44]*h));
+    lane_pair_store(&fh_pairs[90], lane_pair_of(m->F[45]*h, m->F[45]*h));
+    lane_pair_store(&fh_pairs[92], lane_pair_of(m->F[46]*h, m->F[46]*h));
+    lane_pair_store(&fh_pairs[94], lane_pair_of(m->F[47]*h, m->F[47]*h));
+    lane_pair_store(&fh_pairs[96], lane_pair_of(m->F[48]*h, m->F[48]*h));
+    lane_pair_store(&fh_pairs[98], lane_pair_of(m->F[49]*h, m->F[49]*h));
+    lane_pair_store(&fh_pairs[100], lane_pair_of(m->F[50]*h, m->F[50]*h));
+    lane_pair_store(&fh_pairs[102], lane_pair_of(m->F[51]*h, m->F[51]*h));
+    lane_pair_store(&fh_pairs[104], lane_pair_of(m->F[52]*h, m->F[52]*h));
+    lane_pair_store(&fh_pairs[106], lane_pair_of(m->F[53]*h, m->F[53]*h));
+    lane_pair_store(&fh_pairs[108], lane_pair_of(m->F[54]*h, m->F[54]*h));
+    lane_pair_store(&fh_pairs[110], lane_pair_of(m->F[55]*h, m->F[55]*h));
+    lane_pair_store(&fh_pairs[112], lane_pair_of(m->F[56]*h, m->F[56]*h));
+    lane_pair_store(&fh_pairs[114], lane_pair_of(m->F[57]*h, m->F[57]*h));
+    lane_pair_store(&fh_pairs[116], lane_pair_of(m->F[58]*h, m->F[58]*h));
+    lane_pair_store(&fh_pairs[118], lane_pair_of(m->F[59]*h, m->F[59]*h));
+    lane_pair_store(&fh_pairs[120], lane_pair_of(m->F[60]*h, m->F[60]*h));
+    lane_pair_store(&fh_pairs[122], lane_pair_of(m->F[61]*h, m->F[61]*h));
+    lane_pair_store(&fh_pairs[124], lane_pair_of(m->F[62]*h, m->F[62]*h));
+    lane_pair_store(&fh_pairs[126], lane_pair_of(m->F[63]*h, m->F[63]*h));
+    lane_pair_store(&fh_pairs[128], lane_pair_of(m->F[64]*h, m->F[64]*h));
+    lane_pair_store(&fh_pairs[130], lane_pair_of(m->F[65]*h, m->F[65]*h));
+    lane_pair_store(&fh_pairs[132], lane_pair_of(m->F[66]*h, m->F[66]*h));
+    lane_pair_store(&fh_pairs[134], lane_pair_of(m->F[67]*h, m->F[67]*h));
+    lane_pair_store(&fh_pairs[136], lane_pair_of(m->F[68]*h, m->F[68]*h));
+    lane_pair_store(&fh_pairs[138], lane_pair_of(m->F[69]*h, m->F[69]*h));
+    lane_pair_store(&fh_pairs[140], lane_pair_of(m->F[70]*h, m->F[70]*h));
+    lane_pair_store(&fh_pairs[142], lane_pair_of(m->F[71]*h, m->F[71]*h));
+    lane_pair_store(&fh_pairs[144], lane_pair_of(m->F[72]*h, m->F[72]*h));
 }
 
 ENU_DOPPLER18_BLOCK void horner_level_1_into_S(enu_doppler18_discretize_scratch *restrict w, const
         enu_doppler18_scalar c_out, const enu_doppler18_scalar c_in)
 {
+    const enu_doppler18_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     w->S[0] = c_out;
-    w->S[1] = w->fh[0]*c_in;
-    w->S[2] = w->fh[1]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[0], fh_pairs[2]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[1], pair);
+    }
     w->S[3] = 0;
-    w->S[4] = w->fh[2]*c_in;
-    w->S[5] = 0;
-    w->S[6] = 0;
-    w->S[7] = w->fh[3]*c_in;
-    w->S[8] = w->fh[7]*c_in;
-    w->S[9] = w->fh[8]*c_in;
-    w->S[10] = w->fh[9]*c_in;
-    w->S[11] = 0;
-    w->S[12] = 0;
+    w->S[4] = fh_pairs[4]*c_in;
+    lane_pair_store(&w->S[5], lane_pair_of(0, 0));
+    w->S[7] = fh_pairs[6]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[14], fh_pairs[16]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[8], pair);
+    }
+    w->S[10] = fh_pairs[18]*c_in;
+    lane_pair_store(&w->S[11], lane_pair_of(0, 0));
     w->S[13] = 0;
-    w->S[14] = w->fh[10]*c_in;
+    w->S[14] = fh_pairs[20]*c_in;
     w->S[15] = c_out;
-    w->S[16] = w->fh[11]*c_in;
-    w->S[17] = w->fh[12]*c_in;
-    w->S[18] = 0;
-    w->S[19] = 0;
-    w->S[20] = w->fh[13]*c_in;
-    w->S[21] = w->fh[14]*c_in;
-    w->S[22] = w->fh[18]*c_in;
-    w->S[23] = w->fh[19]*c_in;
-    w->S[24] = w->fh[20]*c_in;
-    w->S[25] = 0;
-    w->S[26] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[22], fh_pairs[24]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[16], pair);
+    }
+    lane_pair_store(&w->S[18], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[26], fh_pairs[28]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[20], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[36], fh_pairs[38]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[22], pair);
+    }
+    w->S[24] = fh_pairs[40]*c_in;
+    lane_pair_store(&w->S[25], lane_pair_of(0, 0));
     w->S[27] = 0;
-    w->S[28] = w->fh[21]*c_in;
-    w->S[29] = w->fh[22]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[42], fh_pairs[44]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[28], pair);
+    }
     w->S[30] = c_out;
-    w->S[31] = w->fh[23]*c_in;
-    w->S[32] = 0;
-    w->S[33] = 0;
-    w->S[34] = w->fh[24]*c_in;
-    w->S[35] = w->fh[25]*c_in;
-    w->S[36] = w->fh[29]*c_in;
-    w->S[37] = w->fh[30]*c_in;
-    w->S[38] = w->fh[31]*c_in;
-    w->S[39] = 0;
-    w->S[40] = 0;
-    w->S[41] = 0;
-    w->S[42] = 0;
-    w->S[43] = w->fh[32]*c_in;
-    w->S[44] = w->fh[33]*c_in;
-    w->S[45] = c_out + w->fh[34]*c_in;
-    w->S[46] = w->fh[35]*c_in;
-    w->S[47] = w->fh[36]*c_in;
-    w->S[48] = w->fh[37]*c_in;
-    w->S[49] = w->fh[38]*c_in;
-    w->S[50] = 0;
-    w->S[51] = 0;
+    w->S[31] = fh_pairs[46]*c_in;
+    lane_pair_store(&w->S[32], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[48], fh_pairs[50]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[34], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[58], fh_pairs[60]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[36], pair);
+    }
+    w->S[38] = fh_pairs[62]*c_in;
+    lane_pair_store(&w->S[39], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[41], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[64], fh_pairs[66]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[43], pair);
+    }
+    w->S[45] = c_out + fh_pairs[68]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[70], fh_pairs[72]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[74], fh_pairs[76]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[48], pair);
+    }
+    lane_pair_store(&w->S[50], lane_pair_of(0, 0));
     w->S[52] = 0;
-    w->S[53] = w->fh[39]*c_in;
-    w->S[54] = w->fh[40]*c_in;
-    w->S[55] = w->fh[41]*c_in;
-    w->S[56] = w->fh[42]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[78], fh_pairs[80]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[53], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[82], fh_pairs[84]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[55], pair);
+    }
     w->S[57] = 0;
-    w->S[58] = w->fh[43]*c_in;
-    w->S[59] = w->fh[44]*c_in;
-    w->S[60] = c_out + w->fh[45]*c_in;
-    w->S[61] = w->fh[46]*c_in;
-    w->S[62] = w->fh[47]*c_in;
-    w->S[63] = w->fh[48]*c_in;
-    w->S[64] = 0;
-    w->S[65] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[86], fh_pairs[88]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[58], pair);
+    }
+    w->S[60] = c_out + fh_pairs[90]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[92], fh_pairs[94]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[61], pair);
+    }
+    w->S[63] = fh_pairs[96]*c_in;
+    lane_pair_store(&w->S[64], lane_pair_of(0, 0));
     w->S[66] = 0;
-    w->S[67] = w->fh[49]*c_in;
-    w->S[68] = w->fh[50]*c_in;
-    w->S[69] = w->fh[51]*c_in;
-    w->S[70] = w->fh[52]*c_in;
-    w->S[71] = w->fh[53]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[98], fh_pairs[100]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[67], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[102], fh_pairs[104]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[69], pair);
+    }
+    w->S[71] = fh_pairs[106]*c_in;
     w->S[72] = 0;
-    w->S[73] = w->fh[54]*c_in;
-    w->S[74] = w->fh[55]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[108], fh_pairs[110]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[73], pair);
+    }
     w->S[75] = c_out;
-    w->S[76] = w->fh[56]*c_in;
-    w->S[77] = w->fh[57]*c_in;
-    w->S[78] = 0;
-    w->S[79] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[112], fh_pairs[114]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[76], pair);
+    }
+    lane_pair_store(&w->S[78], lane_pair_of(0, 0));
     w->S[80] = 0;
-    w->S[81] = w->fh[58]*c_in;
-    w->S[82] = w->fh[59]*c_in;
-    w->S[83] = w->fh[60]*c_in;
-    w->S[84] = 0;
-    w->S[85] = 0;
-    w->S[86] = 0;
-    w->S[87] = 0;
-    w->S[88] = w->fh[61]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[116], fh_pairs[118]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[81], pair);
+    }
+    w->S[83] = fh_pairs[120]*c_in;
+    lane_pair_store(&w->S[84], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[86], lane_pair_of(0, 0));
+    w->S[88] = fh_pairs[122]*c_in;
     w->S[89] = 0;
     w->S[90] = c_out;
-    w->S[91] = w->fh[62]*c_in;
-    w->S[92] = 0;
-    w->S[93] = 0;
-    w->S[94] = 0;
-    w->S[95] = 0;
-    w->S[96] = 0;
-    w->S[97] = 0;
-    w->S[98] = 0;
-    w->S[99] = 0;
+    w->S[91] = fh_pairs[124]*c_in;
+    lane_pair_store(&w->S[92], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[94], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[96], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[98], lane_pair_of(0, 0));
     w->S[100] = 0;
-    w->S[101] = w->fh[63]*c_in;
-    w->S[102] = 0;
-    w->S[103] = 0;
-    w->S[104] = w->fh[64]*c_in;
-    w->S[105] = w->fh[65]*c_in;
-    w->S[106] = 0;
-    w->S[107] = 0;
-    w->S[108] = 0;
-    w->S[109] = 0;
-    w->S[110] = 0;
-    w->S[111] = 0;
-    w->S[112] = 0;
-    w->S[113] = 0;
-    w->S[114] = 0;
-    w->S[115] = 0;
+    w->S[101] = fh_pairs[126]*c_in;
+    lane_pair_store(&w->S[102], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[128], fh_pairs[130]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[104], pair);
+    }
+    lane_pair_store(&w->S[106], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[108], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[110], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[112], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[114], lane_pair_of(0, 0));
     w->S[116] = 0;
-    w->S[117] = w->fh[66]*c_in;
+    w->S[117] = fh_pairs[132]*c_in;
     w->S[118] = 0;
     w->S[119] = c_out;
-    w->S[120] = 0;
-    w->S[121] = 0;
-    w->S[122] = 0;
-    w->S[123] = 0;
-    w->S[124] = 0;
-    w->S[125] = 0;
-    w->S[126] = c_out + w->fh[67]*c_in;
-    w->S[127] = c_out + w->fh[68]*c_in;
-    w->S[128] = c_out + w->fh[69]*c_in;
-    w->S[129] = c_out + w->fh[70]*c_in;
-    w->S[130] = c_out + w->fh[71]*c_in;
-    w->S[131] = c_out + w->fh[72]*c_in;
-    w->S[132] = w->fh[4]*c_in;
-    w->S[133] = w->fh[5]*c_in;
-    w->S[134] = w->fh[6]*c_in;
-    w->S[135] = w->fh[15]*c_in;
-    w->S[136] = w->fh[16]*c_in;
-    w->S[137] = w->fh[17]*c_in;
-    w->S[138] = w->fh[26]*c_in;
-    w->S[139] = w->fh[27]*c_in;
-    w->S[140] = w->fh[28]*c_in;
-    w->S[141] = 0;
-    w->S[142] = 0;
-    w->S[143] = 0;
-    w->S[144] = 0;
-    w->S[145] = 0;
-    w->S[146] = 0;
-    w->S[147] = 0;
-    w->S[148] = 0;
-    w->S[149] = 0;
-    w->S[150] = 0;
-    w->S[151] = 0;
-    w->S[152] = 0;
+    lane_pair_store(&w->S[120], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[122], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[124], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[134], fh_pairs[136]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[126], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[138], fh_pairs[140]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[128], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[142], fh_pairs[144]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[130], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[8], fh_pairs[10]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[132], pair);
+    }
+    w->S[134] = fh_pairs[12]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[30], fh_pairs[32]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[135], pair);
+    }
+    w->S[137] = fh_pairs[34]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[52], fh_pairs[54]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[138], pair);
+    }
+    w->S[140] = fh_pairs[56]*c_in;
+    lane_pair_store(&w->S[141], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[143], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[145], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[147], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[149], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[151], lane_pair_of(0, 0));
     w->S[153] = c_out;
-    w->S[154] = 0;
-    w->S[155] = 0;
-    w->S[156] = 0;
-    w->S[157] = 0;
-    w->S[158] = 0;
-    w->S[159] = 0;
+    lane_pair_store(&w->S[154], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[156], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[158], lane_pair_of(0, 0));
 }
 
 ENU_DOPPLER18_BLOCK void horner_level_1_into_term(enu_doppler18_discretize_scratch *restrict w,
         const enu_doppler18_scalar c_out, const enu_doppler18_scalar c_in)
 {
+    const enu_doppler18_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     w->term[1][0] = c_out;
-    w->term[1][1] = w->fh[0]*c_in;
-    w->term[1][2] = w->fh[1]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[0], fh_pairs[2]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][1], pair);
+    }
     w->term[1][3] = 0;
-    w->term[1][4] = w->fh[2]*c_in;
-    w->term[1][5] = 0;
-    w->term[1][6] = 0;
-    w->term[1][7] = w->fh[3]*c_in;
-    w->term[1][8] = w->fh[7]*c_in;
-    w->term[1][9] = w->fh[8]*c_in;
-    w->term[1][10] = w->fh[9]*c_in;
-    w->term[1][11] = 0;
-    w->term[1][12] = 0;
+    w->term[1][4] = fh_pairs[4]*c_in;
+    lane_pair_store(&w->term[1][5], lane_pair_of(0, 0));
+    w->term[1][7] = fh_pairs[6]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[14], fh_pairs[16]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][8], pair);
+    }
+    w->term[1][10] = fh_pairs[18]*c_in;
+    lane_pair_store(&w->term[1][11], lane_pair_of(0, 0));
     w->term[1][13] = 0;
-    w->term[1][14] = w->fh[10]*c_in;
+    w->term[1][14] = fh_pairs[20]*c_in;
     w->term[1][15] = c_out;
-    w->term[1][16] = w->fh[11]*c_in;
-    w->term[1][17] = w->fh[12]*c_in;
-    w->term[1][18] = 0;
-    w->term[1][19] = 0;
-    w->term[1][20] = w->fh[13]*c_in;
-    w->term[1][21] = w->fh[14]*c_in;
-    w->term[1][22] = w->fh[18]*c_in;
-    w->term[1][23] = w->fh[19]*c_in;
-    w->term[1][24] = w->fh[20]*c_in;
-    w->term[1][25] = 0;
-    w->term[1][26] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[22], fh_pairs[24]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][16], pair);
+    }
+    lane_pair_store(&w->term[1][18], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[26], fh_pairs[28]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][20], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[36], fh_pairs[38]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][22], pair);
+    }
+    w->term[1][24] = fh_pairs[40]*c_in;
+    lane_pair_store(&w->term[1][25], lane_pair_of(0, 0));
     w->term[1][27] = 0;
-    w->term[1][28] = w->fh[21]*c_in;
-    w->term[1][29] = w->fh[22]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[42], fh_pairs[44]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][28], pair);
+    }
     w->term[1][30] = c_out;
-    w->term[1][31] = w->fh[23]*c_in;
-    w->term[1][32] = 0;
-    w->term[1][33] = 0;
-    w->term[1][34] = w->fh[24]*c_in;
-    w->term[1][35] = w->fh[25]*c_in;
-    w->term[1][36] = w->fh[29]*c_in;
-    w->term[1][37] = w->fh[30]*c_in;
-    w->term[1][38] = w->fh[31]*c_in;
-    w->term[1][39] = 0;
-    w->term[1][40] = 0;
-    w->term[1][41] = 0;
-    w->term[1][42] = 0;
-    w->term[1][43] = w->fh[32]*c_in;
-    w->term[1][44] = w->fh[33]*c_in;
-    w->term[1][45] = c_out + w->fh[34]*c_in;
-    w->term[1][46] = w->fh[35]*c_in;
-    w->term[1][47] = w->fh[36]*c_in;
-    w->term[1][48] = w->fh[37]*c_in;
-    w->term[1][49] = w->fh[38]*c_in;
-    w->term[1][50] = 0;
-    w->term[1][51] = 0;
+    w->term[1][31] = fh_pairs[46]*c_in;
+    lane_pair_store(&w->term[1][32], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[48], fh_pairs[50]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][34], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[58], fh_pairs[60]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][36], pair);
+    }
+    w->term[1][38] = fh_pairs[62]*c_in;
+    lane_pair_store(&w->term[1][39], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][41], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[64], fh_pairs[66]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][43], pair);
+    }
+    w->term[1][45] = c_out + fh_pairs[68]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[70], fh_pairs[72]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[74], fh_pairs[76]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][48], pair);
+    }
+    lane_pair_store(&w->term[1][50], lane_pair_of(0, 0));
     w->term[1][52] = 0;
-    w->term[1][53] = w->fh[39]*c_in;
-    w->term[1][54] = w->fh[40]*c_in;
-    w->term[1][55] = w->fh[41]*c_in;
-    w->term[1][56] = w->fh[42]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[78], fh_pairs[80]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][53], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[82], fh_pairs[84]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][55], pair);
+    }
     w->term[1][57] = 0;
-    w->term[1][58] = w->fh[43]*c_in;
-    w->term[1][59] = w->fh[44]*c_in;
-    w->term[1][60] = c_out + w->fh[45]*c_in;
-    w->term[1][61] = w->fh[46]*c_in;
-    w->term[1][62] = w->fh[47]*c_in;
-    w->term[1][63] = w->fh[48]*c_in;
-    w->term[1][64] = 0;
-    w->term[1][65] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[86], fh_pairs[88]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][58], pair);
+    }
+    w->term[1][60] = c_out + fh_pairs[90]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[92], fh_pairs[94]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][61], pair);
+    }
+    w->term[1][63] = fh_pairs[96]*c_in;
+    lane_pair_store(&w->term[1][64], lane_pair_of(0, 0));
     w->term[1][66] = 0;
-    w->term[1][67] = w->fh[49]*c_in;
-    w->term[1][68] = w->fh[50]*c_in;
-    w->term[1][69] = w->fh[51]*c_in;
-    w->term[1][70] = w->fh[52]*c_in;
-    w->term[1][71] = w->fh[53]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[98], fh_pairs[100]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][67], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[102], fh_pairs[104]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][69], pair);
+    }
+    w->term[1][71] = fh_pairs[106]*c_in;
     w->term[1][72] = 0;
-    w->term[1][73] = w->fh[54]*c_in;
-    w->term[1][74] = w->fh[55]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[108], fh_pairs[110]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][73], pair);
+    }
     w->term[1][75] = c_out;
-    w->term[1][76] = w->fh[56]*c_in;
-    w->term[1][77] = w->fh[57]*c_in;
-    w->term[1][78] = 0;
-    w->term[1][79] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[112], fh_pairs[114]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][76], pair);
+    }
+    lane_pair_store(&w->term[1][78], lane_pair_of(0, 0));
     w->term[1][80] = 0;
-    w->term[1][81] = w->fh[58]*c_in;
-    w->term[1][82] = w->fh[59]*c_in;
-    w->term[1][83] = w->fh[60]*c_in;
-    w->term[1][84] = 0;
-    w->term[1][85] = 0;
-    w->term[1][86] = 0;
-    w->term[1][87] = 0;
-    w->term[1][88] = w->fh[61]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[116], fh_pairs[118]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][81], pair);
+    }
+    w->term[1][83] = fh_pairs[120]*c_in;
+    lane_pair_store(&w->term[1][84], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][86], lane_pair_of(0, 0));
+    w->term[1][88] = fh_pairs[122]*c_in;
     w->term[1][89] = 0;
     w->term[1][90] = c_out;
-    w->term[1][91] = w->fh[62]*c_in;
-    w->term[1][92] = 0;
-    w->term[1][93] = 0;
-    w->term[1][94] = 0;
-    w->term[1][95] = 0;
-    w->term[1][96] = 0;
-    w->term[1][97] = 0;
-    w->term[1][98] = 0;
-    w->term[1][99] = 0;
+    w->term[1][91] = fh_pairs[124]*c_in;
+    lane_pair_store(&w->term[1][92], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][94], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][96], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][98], lane_pair_of(0, 0));
     w->term[1][100] = 0;
-    w->term[1][101] = w->fh[63]*c_in;
-    w->term[1][102] = 0;
-    w->term[1][103] = 0;
-    w->term[1][104] = w->fh[64]*c_in;
-    w->term[1][105] = w->fh[65]*c_in;
-    w->term[1][106] = 0;
-    w->term[1][107] = 0;
-    w->term[1][108] = 0;
-    w->term[1][109] = 0;
-    w->term[1][110] = 0;
-    w->term[1][111] = 0;
-    w->term[1][112] = 0;
-    w->term[1][113] = 0;
-    w->term[1][114] = 0;
-    w->term[1][115] = 0;
+    w->term[1][101] = fh_pairs[126]*c_in;
+    lane_pair_store(&w->term[1][102], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[128], fh_pairs[130]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][104], pair);
+    }
+    lane_pair_store(&w->term[1][106], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][108], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][110], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][112], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][114], lane_pair_of(0, 0));
     w->term[1][116] = 0;
-    w->term[1][117] = w->fh[66]*c_in;
+    w->term[1][117] = fh_pairs[132]*c_in;
     w->term[1][118] = 0;
     w->term[1][119] = c_out;
-    w->term[1][120] = 0;
-    w->term[1][121] = 0;
-    w->term[1][122] = 0;
-    w->term[1][123] = 0;
-    w->term[1][124] = 0;
-    w->term[1][125] = 0;
-    w->term[1][126] = c_out + w->fh[67]*c_in;
-    w->term[1][127] = c_out + w->fh[68]*c_in;
-    w->term[1][128] = c_out + w->fh[69]*c_in;
-    w->term[1][129] = c_out + w->fh[70]*c_in;
-    w->term[1][130] = c_out + w->fh[71]*c_in;
-    w->term[1][131] = c_out + w->fh[72]*c_in;
-    w->term[1][132] = w->fh[4]*c_in;
-    w->term[1][133] = w->fh[5]*c_in;
-    w->term[1][134] = w->fh[6]*c_in;
-    w->term[1][135] = w->fh[15]*c_in;
-    w->term[1][136] = w->fh[16]*c_in;
-    w->term[1][137] = w->fh[17]*c_in;
-    w->term[1][138] = w->fh[26]*c_in;
-    w->term[1][139] = w->fh[27]*c_in;
-    w->term[1][140] = w->fh[28]*c_in;
-    w->term[1][141] = 0;
-    w->term[1][142] = 0;
-    w->term[1][143] = 0;
-    w->term[1][144] = 0;
-    w->term[1][145] = 0;
-    w->term[1][146] = 0;
-    w->term[1][147] = 0;
-    w->term[1][148] = 0;
-    w->term[1][149] = 0;
-    w->term[1][150] = 0;
-    w->term[1][151] = 0;
-    w->term[1][152] = 0;
+    lane_pair_store(&w->term[1][120], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][122], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][124], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[134], fh_pairs[136]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][126], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[138], fh_pairs[140]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][128], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[142], fh_pairs[144]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][130], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[8], fh_pairs[10]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][132], pair);
+    }
+    w->term[1][134] = fh_pairs[12]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[30], fh_pairs[32]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][135], pair);
+    }
+    w->term[1][137] = fh_pairs[34]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[52], fh_pairs[54]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][138], pair);
+    }
+    w->term[1][140] = fh_pairs[56]*c_in;
+    lane_pair_store(&w->term[1][141], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][143], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][145], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][147], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][149], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][151], lane_pair_of(0, 0));
     w->term[1][153] = c_out;
-    w->term[1][154] = 0;
-    w->term[1][155] = 0;
-    w->term[1][156] = 0;
-    w->term[1][157] = 0;
-    w->term[1][158] = 0;
-    w->term[1][159] = 0;
+    lane_pair_store(&w->term[1][154], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][156], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][158], lane_pair_of(0, 0));
 }
 
 ENU_DOPPLER18_BLOCK void horner_saturated_into_S(enu_doppler18_discretize_scratch *restrict w, const
         enu_doppler18_scalar c_out)
 {
+    const enu_doppler18_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 14; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][14+k] + w->fh[1]*w->term[1][28+k] + w->fh[2]*w->term[1][56+k]
-                + w->fh[3]*w->term[1][112+k];
-        w->S[14+k] = w->fh[10]*w->term[1][k] + w->fh[11]*w->term[1][28+k] +
-                w->fh[12]*w->term[1][42+k] + w->fh[13]*w->term[1][84+k] +
-                w->fh[14]*w->term[1][112+k];
-        w->S[28+k] = w->fh[21]*w->term[1][k] + w->fh[22]*w->term[1][14+k] +
-                w->fh[23]*w->term[1][42+k] + w->fh[24]*w->term[1][84+k] +
-                w->fh[25]*w->term[1][112+k];
-        w->S[42+k] = w->fh[32]*w->term[1][14+k] + w->fh[33]*w->term[1][28+k] +
-                w->fh[34]*w->term[1][42+k] + w->fh[35]*w->term[1][56+k] + w->fh[36]*w->term[1][70+k]
-                + w->fh[37]*w->term[1][84+k] + w->fh[38]*w->term[1][112+k];
-        w->S[56+k] = w->fh[42]*w->term[1][k] + w->fh[43]*w->term[1][28+k] +
-                w->fh[44]*w->term[1][42+k] + w->fh[45]*w->term[1][56+k] + w->fh[46]*w->term[1][70+k]
-                + w->fh[47]*w->term[1][84+k] + w->fh[48]*w->term[1][112+k];
-        w->S[70+k] = w->fh[52]*w->term[1][k] + w->fh[53]*w->term[1][14+k] +
-                w->fh[54]*w->term[1][42+k] + w->fh[55]*w->term[1][56+k] + w->fh[56]*w->term[1][84+k]
-                + w->fh[57]*w->term[1][112+k];
-        w->S[84+k] = w->fh[61]*w->term[1][56+k] + w->fh[62]*w->term[1][112+k];
-        w->S[112+k] = w->fh[66]*w->term[1][70+k];
+    for (k = 0; k < 14; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->term[1][14+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->term[1][28+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->term[1][56+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->term[1][112+k]));
+        lane_pair_store(&w->S[k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->term[1][28+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->term[1][42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->term[1][84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[28]),
+                lane_pair_load(&w->term[1][112+k]));
+        lane_pair_store(&w->S[14+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->term[1][14+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->term[1][42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->term[1][84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->term[1][112+k]));
+        lane_pair_store(&w->S[28+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->term[1][14+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->term[1][28+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[68]),
+                lane_pair_load(&w->term[1][42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->term[1][56+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[72]),
+                lane_pair_load(&w->term[1][70+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[74]),
+                lane_pair_load(&w->term[1][84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->term[1][112+k]));
+        lane_pair_store(&w->S[42+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[84]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[86]),
+                lane_pair_load(&w->term[1][28+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[88]),
+                lane_pair_load(&w->term[1][42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[90]),
+                lane_pair_load(&w->term[1][56+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[92]),
+                lane_pair_load(&w->term[1][70+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->term[1][84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[96]),
+                lane_pair_load(&w->term[1][112+k]));
+        lane_pair_store(&w->S[56+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[104]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[106]),
+                lane_pair_load(&w->term[1][14+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[108]),
+                lane_pair_load(&w->term[1][42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[110]),
+                lane_pair_load(&w->term[1][56+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->term[1][84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->term[1][112+k]));
+        lane_pair_store(&w->S[70+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[122]),
+                lane_pair_load(&w->term[1][56+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[124]),
+                lane_pair_load(&w->term[1][112+k]));
+        lane_pair_store(&w->S[84+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[132]),
+                lane_pair_load(&w->term[1][70+k]));
+        lane_pair_store(&w->S[112+k], lanes);
     }
     w->S[0] = w->S[0] + c_out;
-    w->S[8] = w->S[8] + w->fh[7]*w->term[1][126];
-    w->S[9] = w->S[9] + w->fh[8]*w->term[1][127];
-    w->S[10] = w->S[10] + w->fh[9]*w->term[1][128];
+    w->S[8] = w->S[8] + fh_pairs[14]*w->term[1][126];
+    w->S[9] = w->S[9] + fh_pairs[16]*w->term[1][127];
+    w->S[10] = w->S[10] + fh_pairs[18]*w->term[1][128];
     w->S[15] = w->S[15] + c_out;
-    w->S[22] = w->S[22] + w->fh[18]*w->term[1][126];
-    w->S[23] = w->S[23] + w->fh[19]*w->term[1][127];
-    w->S[24] = w->S[24] + w->fh[20]*w->term[1][128];
+    w->S[22] = w->S[22] + fh_pairs[36]*w->term[1][126];
+    w->S[23] = w->S[23] + fh_pairs[38]*w->term[1][127];
+    w->S[24] = w->S[24] + fh_pairs[40]*w->term[1][128];
     w->S[30] = w->S[30] + c_out;
-    w->S[36] = w->S[36] + w->fh[29]*w->term[1][126];
-    w->S[37] = w->S[37] + w->fh[30]*w->term[1][127];
-    w->S[38] = w->S[38] + w->fh[31]*w->term[1][128];
+    w->S[36] = w->S[36] + fh_pairs[58]*w->term[1][126];
+    w->S[37] = w->S[37] + fh_pairs[60]*w->term[1][127];
+    w->S[38] = w->S[38] + fh_pairs[62]*w->term[1][128];
     w->S[45] = w->S[45] + c_out;
-    w->S[53] = w->S[53] + w->fh[39]*w->term[1][129];
-    w->S[54] = w->S[54] + w->fh[40]*w->term[1][130];
-    w->S[55] = w->S[55] + w->fh[41]*w->term[1][131];
+    w->S[53] = w->S[53] + fh_pairs[78]*w->term[1][129];
+    w->S[54] = w->S[54] + fh_pairs[80]*w->term[1][130];
+    w->S[55] = w->S[55] + fh_pairs[82]*w->term[1][131];
     w->S[60] = w->S[60] + c_out;
-    w->S[67] = w->S[67] + w->fh[49]*w->term[1][129];
-    w->S[68] = w->S[68] + w->fh[50]*w->term[1][130];
-    w->S[69] = w->S[69] + w->fh[51]*w->term[1][131];
+    w->S[67] = w->S[67] + fh_pairs[98]*w->term[1][129];
+    w->S[68] = w->S[68] + fh_pairs[100]*w->term[1][130];
+    w->S[69] = w->S[69] + fh_pairs[102]*w->term[1][131];
     w->S[75] = w->S[75] + c_out;
-    w->S[81] = w->S[81] + w->fh[58]*w->term[1][129];
-    w->S[82] = w->S[82] + w->fh[59]*w->term[1][130];
-    w->S[83] = w->S[83] + w->fh[60]*w->term[1][131];
+    w->S[81] = w->S[81] + fh_pairs[116]*w->term[1][129];
+    w->S[82] = w->S[82] + fh_pairs[118]*w->term[1][130];
+    w->S[83] = w->S[83] + fh_pairs[120]*w->term[1][131];
     w->S[90] = w->S[90] + c_out;
     w->S[119] = w->S[119] + c_out;
-    w->S[126] = c_out + w->fh[67]*w->term[1][126];
-    w->S[127] = c_out + w->fh[68]*w->term[1][127];
-    w->S[128] = c_out + w->fh[69]*w->term[1][128];
-    w->S[129] = c_out + w->fh[70]*w->term[1][129];
-    w->S[130] = c_out + w->fh[71]*w->term[1][130];
-    w->S[131] = c_out + w->fh[72]*w->term[1][131];
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[134], fh_pairs[136]),
+                lane_pair_load(&w->term[1][126]));
+        lane_pair_store(&w->S[126], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[138], fh_pairs[140]),
+                lane_pair_load(&w->term[1][128]));
+        lane_pair_store(&w->S[128], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[142], fh_pairs[144]),
+                lane_pair_load(&w->term[1][130]));
+        lane_pair_store(&w->S[130], pair);
+    }
 }
 
 ENU_DOPPLER18_BLOCK void horner_saturated_into_term(enu_doppler18_discretize_scratch *restrict w,
         const enu_doppler18_scalar c_out)
 {
+    const enu_doppler18_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 14; ++k) {
-        w->term[1][k] = w->fh[0]*w->S[14+k] + w->fh[1]*w->S[28+k] + w->fh[2]*w->S[56+k] +
-                w->fh[3]*w->S[112+k];
-        w->term[1][14+k] = w->fh[10]*w->S[k] + w->fh[11]*w->S[28+k] + w->fh[12]*w->S[42+k] +
-                w->fh[13]*w->S[84+k] + w->fh[14]*w->S[112+k];
-        w->term[1][28+k] = w->fh[21]*w->S[k] + w->fh[22]*w->S[14+k] + w->fh[23]*w->S[42+k] +
-                w->fh[24]*w->S[84+k] + w->fh[25]*w->S[112+k];
-        w->term[1][42+k] = w->fh[32]*w->S[14+k] + w->fh[33]*w->S[28+k] + w->fh[34]*w->S[42+k] +
-                w->fh[35]*w->S[56+k] + w->fh[36]*w->S[70+k] + w->fh[37]*w->S[84+k] +
-                w->fh[38]*w->S[112+k];
-        w->term[1][56+k] = w->fh[42]*w->S[k] + w->fh[43]*w->S[28+k] + w->fh[44]*w->S[42+k] +
-                w->fh[45]*w->S[56+k] + w->fh[46]*w->S[70+k] + w->fh[47]*w->S[84+k] +
-                w->fh[48]*w->S[112+k];
-        w->term[1][70+k] = w->fh[52]*w->S[k] + w->fh[53]*w->S[14+k] + w->fh[54]*w->S[42+k] +
-                w->fh[55]*w->S[56+k] + w->fh[56]*w->S[84+k] + w->fh[57]*w->S[112+k];
-        w->term[1][84+k] = w->fh[61]*w->S[56+k] + w->fh[62]*w->S[112+k];
-        w->term[1][112+k] = w->fh[66]*w->S[70+k];
+    for (k = 0; k < 14; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->S[14+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[28+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[56+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[112+k]));
+        lane_pair_store(&w->term[1][k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[28+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->S[84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[28]),
+                lane_pair_load(&w->S[112+k]));
+        lane_pair_store(&w->term[1][14+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[42]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[14+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->S[42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->S[84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[112+k]));
+        lane_pair_store(&w->term[1][28+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[14+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[28+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[68]),
+                lane_pair_load(&w->S[42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->S[56+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[72]),
+                lane_pair_load(&w->S[70+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[74]),
+                lane_pair_load(&w->S[84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[112+k]));
+        lane_pair_store(&w->term[1][42+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[84]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[86]),
+                lane_pair_load(&w->S[28+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[88]),
+                lane_pair_load(&w->S[42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[90]),
+                lane_pair_load(&w->S[56+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[92]),
+                lane_pair_load(&w->S[70+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->S[84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[96]),
+                lane_pair_load(&w->S[112+k]));
+        lane_pair_store(&w->term[1][56+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[104]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[106]),
+                lane_pair_load(&w->S[14+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[108]),
+                lane_pair_load(&w->S[42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[110]),
+                lane_pair_load(&w->S[56+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->S[84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[112+k]));
+        lane_pair_store(&w->term[1][70+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[122]),
+                lane_pair_load(&w->S[56+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[124]),
+                lane_pair_load(&w->S[112+k]));
+        lane_pair_store(&w->term[1][84+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[132]),
+                lane_pair_load(&w->S[70+k]));
+        lane_pair_store(&w->term[1][112+k], lanes);
     }
     w->term[1][0] = w->term[1][0] + c_out;
-    w->term[1][8] = w->term[1][8] + w->fh[7]*w->S[126];
-    w->term[1][9] = w->term[1][9] + w->fh[8]*w->S[127];
-    w->term[1][10] = w->term[1][10] + w->fh[9]*w->S[128];
+    w->term[1][8] = w->term[1][8] + fh_pairs[14]*w->S[126];
+    w->term[1][9] = w->term[1][9] + fh_pairs[16]*w->S[127];
+    w->term[1][10] = w->term[1][10] + fh_pairs[18]*w->S[128];
     w->term[1][15] = w->term[1][15] + c_out;
-    w->term[1][22] = w->term[1][22] + w->fh[18]*w->S[126];
-    w->term[1][23] = w->term[1][23] + w->fh[19]*w->S[127];
-    w->term[1][24] = w->term[1][24] + w->fh[20]*w->S[128];
+    w->term[1][22] = w->term[1][22] + fh_pairs[36]*w->S[126];
+    w->term[1][23] = w->term[1][23] + fh_pairs[38]*w->S[127];
+    w->term[1][24] = w->term[1][24] + fh_pairs[40]*w->S[128];
     w->term[1][30] = w->term[1][30] + c_out;
-    w->term[1][36] = w->term[1][36] + w->fh[29]*w->S[126];
-    w->term[1][37] = w->term[1][37] + w->fh[30]*w->S[127];
-    w->term[1][38] = w->term[1][38] + w->fh[31]*w->S[128];
+    w->term[1][36] = w->term[1][36] + fh_pairs[58]*w->S[126];
+    w->term[1][37] = w->term[1][37] + fh_pairs[60]*w->S[127];
+    w->term[1][38] = w->term[1][38] + fh_pairs[62]*w->S[128];
     w->term[1][45] = w->term[1][45] + c_out;
-    w->term[1][53] = w->term[1][53] + w->fh[39]*w->S[129];
-    w->term[1][54] = w->term[1][54] + w->fh[40]*w->S[130];
-    w->term[1][55] = w->term[1][55] + w->fh[41]*w->S[131];
+    w->term[1][53] = w->term[1][53] + fh_pairs[78]*w->S[129];
+    w->term[1][54] = w->term[1][54] + fh_pairs[80]*w->S[130];
+    w->term[1][55] = w->term[1][55] + fh_pairs[82]*w->S[131];
     w->term[1][60] = w->term[1][60] + c_out;
-    w->term[1][67] = w->term[1][67] + w->fh[49]*w->S[129];
-    w->term[1][68] = w->term[1][68] + w->fh[50]*w->S[130];
-    w->term[1][69] = w->term[1][69] + w->fh[51]*w->S[131];
+    w->term[1][67] = w->term[1][67] + fh_pairs[98]*w->S[129];
+    w->term[1][68] = w->term[1][68] + fh_pairs[100]*w->S[130];
+    w->term[1][69] = w->term[1][69] + fh_pairs[102]*w->S[131];
     w->term[1][75] = w->term[1][75] + c_out;
-    w->term[1][81] = w->term[1][81] + w->fh[58]*w->S[129];
-    w->term[1][82] = w->term[1][82] + w->fh[59]*w->S[130];
-    w->term[1][83] = w->term[1][83] + w->fh[60]*w->S[131];
+    w->term[1][81] = w->term[1][81] + fh_pairs[116]*w->S[129];
+    w->term[1][82] = w->term[1][82] + fh_pairs[118]*w->S[130];
+    w->term[1][83] = w->term[1][83] + fh_pairs[120]*w->S[131];
     w->term[1][90] = w->term[1][90] + c_out;
     w->term[1][119] = w->term[1][119] + c_out;
-    w->term[1][126] = c_out + w->fh[67]*w->S[126];
-    w->term[1][127] = c_out + w->fh[68]*w->S[127];
-    w->term[1][128] = c_out + w->fh[69]*w->S[128];
-    w->term[1][129] = c_out + w->fh[70]*w->S[129];
-    w->term[1][130] = c_out + w->fh[71]*w->S[130];
-    w->term[1][131] = c_out + w->fh[72]*w->S[131];
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[134], fh_pairs[136]),
+                lane_pair_load(&w->S[126]));
+        lane_pair_store(&w->term[1][126], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[138], fh_pairs[140]),
+                lane_pair_load(&w->S[128]));
+        lane_pair_store(&w->term[1][128], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[142], fh_pairs[144]),
+                lane_pair_load(&w->S[130]));
+        lane_pair_store(&w->term[1][130], pair);
+    }
 }
 
 ENU_DOPPLER18_BLOCK void horner_first_into_term(enu_doppler18_discretize_scratch *restrict w, const
         enu_doppler18_scalar c_out)
 {
+    const enu_doppler18_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 14; ++k) {
-        w->term[1][k] = w->fh[0]*w->S[14+k] + w->fh[1]*w->S[28+k] + w->fh[2]*w->S[56+k] +
-                w->fh[3]*w->S[112+k];
-        w->term[1][14+k] = w->fh[10]*w->S[k] + w->fh[11]*w->S[28+k] + w->fh[12]*w->S[42+k] +
-                w->fh[13]*w->S[84+k] + w->fh[14]*w->S[112+k];
-        w->term[1][28+k] = w->fh[21]*w->S[k] + w->fh[22]*w->S[14+k] + w->fh[23]*w->S[42+k] +
-                w->fh[24]*w->S[84+k] + w->fh[25]*w->S[112+k];
-        w->term[1][42+k] = w->fh[32]*w->S[14+k] + w->fh[33]*w->S[28+k] + w->fh[34]*w->S[42+k] +
-                w->fh[35]*w->S[56+k] + w->fh[36]*w->S[70+k] + w->fh[37]*w->S[84+k] +
-                w->fh[38]*w->S[112+k];
-        w->term[1][56+k] = w->fh[42]*w->S[k] + w->fh[43]*w->S[28+k] + w->fh[44]*w->S[42+k] +
-                w->fh[45]*w->S[56+k] + w->fh[46]*w->S[70+k] + w->fh[47]*w->S[84+k] +
-                w->fh[48]*w->S[112+k];
-        w->term[1][70+k] = w->fh[52]*w->S[k] + w->fh[53]*w->S[14+k] + w->fh[54]*w->S[42+k] +
-                w->fh[55]*w->S[56+k] + w->fh[56]*w->S[84+k] + w->fh[57]*w->S[112+k];
-        w->term[1][84+k] = w->fh[61]*w->S[56+k] + w->fh[62]*w->S[112+k];
-        w->term[1][98+k] = w->fh[63]*w->S[42+k] + w->fh[64]*w->S[84+k] + w->fh[65]*w->S[112+k];
-        w->term[1][112+k] = w->fh[66]*w->S[70+k];
+    for (k = 0; k < 14; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->S[14+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[28+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[56+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[112+k]));
+        lane_pair_store(&w->term[1][k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[28+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->S[84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[28]),
+                lane_pair_load(&w->S[112+k]));
+        lane_pair_store(&w->term[1][14+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[42]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[14+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->S[42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->S[84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[112+k]));
+        lane_pair_store(&w->term[1][28+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[14+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[28+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[68]),
+                lane_pair_load(&w->S[42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->S[56+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[72]),
+                lane_pair_load(&w->S[70+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[74]),
+                lane_pair_load(&w->S[84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[112+k]));
+        lane_pair_store(&w->term[1][42+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[84]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[86]),
+                lane_pair_load(&w->S[28+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[88]),
+                lane_pair_load(&w->S[42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[90]),
+                lane_pair_load(&w->S[56+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[92]),
+                lane_pair_load(&w->S[70+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->S[84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[96]),
+                lane_pair_load(&w->S[112+k]));
+        lane_pair_store(&w->term[1][56+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[104]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[106]),
+                lane_pair_load(&w->S[14+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[108]),
+                lane_pair_load(&w->S[42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[110]),
+                lane_pair_load(&w->S[56+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->S[84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[112+k]));
+        lane_pair_store(&w->term[1][70+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[122]),
+                lane_pair_load(&w->S[56+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[124]),
+                lane_pair_load(&w->S[112+k]));
+        lane_pair_store(&w->term[1][84+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[126]),
+                lane_pair_load(&w->S[42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[128]),
+                lane_pair_load(&w->S[84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[130]),
+                lane_pair_load(&w->S[112+k]));
+        lane_pair_store(&w->term[1][98+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[132]),
+                lane_pair_load(&w->S[70+k]));
+        lane_pair_store(&w->term[1][112+k], lanes);
     }
     w->term[1][0] = w->term[1][0] + c_out;
-    w->term[1][8] = w->term[1][8] + w->fh[7]*w->S[126];
-    w->term[1][9] = w->term[1][9] + w->fh[8]*w->S[127];
-    w->term[1][10] = w->term[1][10] + w->fh[9]*w->S[128];
+    w->term[1][8] = w->term[1][8] + fh_pairs[14]*w->S[126];
+    w->term[1][9] = w->term[1][9] + fh_pairs[16]*w->S[127];
+    w->term[1][10] = w->term[1][10] + fh_pairs[18]*w->S[128];
     w->term[1][15] = w->term[1][15] + c_out;
-    w->term[1][22] = w->term[1][22] + w->fh[18]*w->S[126];
-    w->term[1][23] = w->term[1][23] + w->fh[19]*w->S[127];
-    w->term[1][24] = w->term[1][24] + w->fh[20]*w->S[128];
+    w->term[1][22] = w->term[1][22] + fh_pairs[36]*w->S[126];
+    w->term[1][23] = w->term[1][23] + fh_pairs[38]*w->S[127];
+    w->term[1][24] = w->term[1][24] + fh_pairs[40]*w->S[128];
     w->term[1][30] = w->term[1][30] + c_out;
-    w->term[1][36] = w->term[1][36] + w->fh[29]*w->S[126];
-    w->term[1][37] = w->term[1][37] + w->fh[30]*w->S[127];
-    w->term[1][38] = w->term[1][38] + w->fh[31]*w->S[128];
+    w->term[1][36] = w->term[1][36] + fh_pairs[58]*w->S[126];
+    w->term[1][37] = w->term[1][37] + fh_pairs[60]*w->S[127];
+    w->term[1][38] = w->term[1][38] + fh_pairs[62]*w->S[128];
     w->term[1][45] = w->term[1][45] + c_out;
-    w->term[1][53] = w->term[1][53] + w->fh[39]*w->S[129];
-    w->term[1][54] = w->term[1][54] + w->fh[40]*w->S[130];
-    w->term[1][55] = w->term[1][55] + w->fh[41]*w->S[131];
+    w->term[1][53] = w->term[1][53] + fh_pairs[78]*w->S[129];
+    w->term[1][54] = w->term[1][54] + fh_pairs[80]*w->S[130];
+    w->term[1][55] = w->term[1][55] + fh_pairs[82]*w->S[131];
     w->term[1][60] = w->term[1][60] + c_out;
-    w->term[1][67] = w->term[1][67] + w->fh[49]*w->S[129];
-    w->term[1][68] = w->term[1][68] + w->fh[50]*w->S[130];
-    w->term[1][69] = w->term[1][69] + w->fh[51]*w->S[131];
+    w->term[1][67] = w->term[1][67] + fh_pairs[98]*w->S[129];
+    w->term[1][68] = w->term[1][68] + fh_pairs[100]*w->S[130];
+    w->term[1][69] = w->term[1][69] + fh_pairs[102]*w->S[131];
     w->term[1][75] = w->term[1][75] + c_out;
-    w->term[1][81] = w->term[1][81] + w->fh[58]*w->S[129];
-    w->term[1][82] = w->term[1][82] + w->fh[59]*w->S[130];
-    w->term[1][83] = w->term[1][83] + w->fh[60]*w->S[131];
+    w->term[1][81] = w->term[1][81] + fh_pairs[116]*w->S[129];
+    w->term[1][82] = w->term[1][82] + fh_pairs[118]*w->S[130];
+    w->term[1][83] = w->term[1][83] + fh_pairs[120]*w->S[131];
     w->term[1][90] = w->term[1][90] + c_out;
     w->term[1][153] = c_out;
     w->term[1][119] = w->term[1][119] + c_out;
-    w->term[1][126] = c_out + w->fh[67]*w->S[126];
-    w->term[1][127] = c_out + w->fh[68]*w->S[127];
-    w->term[1][128] = c_out + w->fh[69]*w->S[128];
-    w->term[1][129] = c_out + w->fh[70]*w->S[129];
-    w->term[1][130] = c_out + w->fh[71]*w->S[130];
-    w->term[1][131] = c_out + w->fh[72]*w->S[131];
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[134], fh_pairs[136]),
+                lane_pair_load(&w->S[126]));
+        lane_pair_store(&w->term[1][126], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[138], fh_pairs[140]),
+                lane_pair_load(&w->S[128]));
+        lane_pair_store(&w->term[1][128], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[142], fh_pairs[144]),
+                lane_pair_load(&w->S[130]));
+        lane_pair_store(&w->term[1][130], pair);
+    }
 }
 
 ENU_DOPPLER18_BLOCK void horner_last_into_S(enu_doppler18_discretize_scratch *restrict w, const
         enu_doppler18_scalar c_out)
 {
+    const enu_doppler18_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 14; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][14+k] + w->fh[1]*w->term[1][28+k] + w->fh[2]*w->term[1][56+k]
-                + w->fh[3]*w->term[1][112+k];
-        w->S[14+k] = w->fh[10]*w->term[1][k] + w->fh[11]*w->term[1][28+k] +
-                w->fh[12]*w->term[1][42+k] + w->fh[13]*w->term[1][84+k] +
-                w->fh[14]*w->term[1][112+k];
-        w->S[28+k] = w->fh[21]*w->term[1][k] + w->fh[22]*w->term[1][14+k] +
-                w->fh[23]*w->term[1][42+k] + w->fh[24]*w->term[1][84+k] +
-                w->fh[25]*w->term[1][112+k];
-        w->S[42+k] = w->fh[32]*w->term[1][14+k] + w->fh[33]*w->term[1][28+k] +
-                w->fh[34]*w->term[1][42+k] + w->fh[35]*w->term[1][56+k] + w->fh[36]*w->term[1][70+k]
-                + w->fh[37]*w->term[1][84+k] + w->fh[38]*w->term[1][112+k];
-        w->S[56+k] = w->fh[42]*w->term[1][k] + w->fh[43]*w->term[1][28+k] +
-                w->fh[44]*w->term[1][42+k] + w->fh[45]*w->term[1][56+k] + w->fh[46]*w->term[1][70+k]
-                + w->fh[47]*w->term[1][84+k] + w->fh[48]*w->term[1][112+k];
-        w->S[70+k] = w->fh[52]*w->term[1][k] + w->fh[53]*w->term[1][14+k] +
-                w->fh[54]*w->term[1][42+k] + w->fh[55]*w->term[1][56+k] + w->fh[56]*w->term[1][84+k]
-                + w->fh[57]*w->term[1][112+k];
-        w->S[84+k] = w->fh[61]*w->term[1][56+k] + w->fh[62]*w->term[1][112+k];
-        w->S[98+k] = w->fh[63]*w->term[1][42+k] + w->fh[64]*w->term[1][84+k] +
-                w->fh[65]*w->term[1][112+k];
-        w->S[112+k] = w->fh[66]*w->term[1][70+k];
+    for (k = 0; k < 14; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->term[1][14+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->term[1][28+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->term[1][56+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->term[1][112+k]));
+        lane_pair_store(&w->S[k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->term[1][28+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->term[1][42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->term[1][84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[28]),
+                lane_pair_load(&w->term[1][112+k]));
+        lane_pair_store(&w->S[14+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->term[1][14+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->term[1][42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->term[1][84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->term[1][112+k]));
+        lane_pair_store(&w->S[28+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->term[1][14+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->term[1][28+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[68]),
+                lane_pair_load(&w->term[1][42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->term[1][56+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[72]),
+                lane_pair_load(&w->term[1][70+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[74]),
+                lane_pair_load(&w->term[1][84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->term[1][112+k]));
+        lane_pair_store(&w->S[42+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[84]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[86]),
+                lane_pair_load(&w->term[1][28+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[88]),
+                lane_pair_load(&w->term[1][42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[90]),
+                lane_pair_load(&w->term[1][56+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[92]),
+                lane_pair_load(&w->term[1][70+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->term[1][84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[96]),
+                lane_pair_load(&w->term[1][112+k]));
+        lane_pair_store(&w->S[56+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[104]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[106]),
+                lane_pair_load(&w->term[1][14+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[108]),
+                lane_pair_load(&w->term[1][42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[110]),
+                lane_pair_load(&w->term[1][56+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->term[1][84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->term[1][112+k]));
+        lane_pair_store(&w->S[70+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[122]),
+                lane_pair_load(&w->term[1][56+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[124]),
+                lane_pair_load(&w->term[1][112+k]));
+        lane_pair_store(&w->S[84+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[126]),
+                lane_pair_load(&w->term[1][42+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[128]),
+                lane_pair_load(&w->term[1][84+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[130]),
+                lane_pair_load(&w->term[1][112+k]));
+        lane_pair_store(&w->S[98+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[132]),
+                lane_pair_load(&w->term[1][70+k]));
+        lane_pair_store(&w->S[112+k], lanes);
     }
     w->S[0] = w->S[0] + c_out;
-    w->S[8] = w->S[8] + w->fh[7]*w->term[1][126];
-    w->S[9] = w->S[9] + w->fh[8]*w->term[1][127];
-    w->S[10] = w->S[10] + w->fh[9]*w->term[1][128];
+    w->S[8] = w->S[8] + fh_pairs[14]*w->term[1][126];
+    w->S[9] = w->S[9] + fh_pairs[16]*w->term[1][127];
+    w->S[10] = w->S[10] + fh_pairs[18]*w->term[1][128];
     w->S[15] = w->S[15] + c_out;
-    w->S[22] = w->S[22] + w->fh[18]*w->term[1][126];
-    w->S[23] = w->S[23] + w->fh[19]*w->term[1][127];
-    w->S[24] = w->S[24] + w->fh[20]*w->term[1][128];
+    w->S[22] = w->S[22] + fh_pairs[36]*w->term[1][126];
+    w->S[23] = w->S[23] + fh_pairs[38]*w->term[1][127];
+    w->S[24] = w->S[24] + fh_pairs[40]*w->term[1][128];
     w->S[30] = w->S[30] + c_out;
-    w->S[36] = w->S[36] + w->fh[29]*w->term[1][126];
-    w->S[37] = w->S[37] + w->fh[30]*w->term[1][127];
-    w->S[38] = w->S[38] + w->fh[31]*w->term[1][128];
+    w->S[36] = w->S[36] + fh_pairs[58]*w->term[1][126];
+    w->S[37] = w->S[37] + fh_pairs[60]*w->term[1][127];
+    w->S[38] = w->S[38] + fh_pairs[62]*w->term[1][128];
     w->S[45] = w->S[45] + c_out;
-    w->S[53] = w->S[53] + w->fh[39]*w->term[1][129];
-    w->S[54] = w->S[54] + w->fh[40]*w->term[1][130];
-    w->S[55] = w->S[55] + w->fh[41]*w->term[1][131];
+    w->S[53] = w->S[53] + fh_pairs[78]*w->term[1][129];
+    w->S[54] = w->S[54] + fh_pairs[80]*w->term[1][130];
+    w->S[55] = w->S[55] + fh_pairs[82]*w->term[1][131];
     w->S[60] = w->S[60] + c_out;
-    w->S[67] = w->S[67] + w->fh[49]*w->term[1][129];
-    w->S[68] = w->S[68] + w->fh[50]*w->term[1][130];
-    w->S[69] = w->S[69] + w->fh[51]*w->term[1][131];
+    w->S[67] = w->S[67] + fh_pairs[98]*w->term[1][129];
+    w->S[68] = w->S[68] + fh_pairs[100]*w->term[1][130];
+    w->S[69] = w->S[69] + fh_pairs[102]*w->term[1][131];
     w->S[75] = w->S[75] + c_out;
-    w->S[81] = w->S[81] + w->fh[58]*w->term[1][129];
-    w->S[82] = w->S[82] + w->fh[59]*w->term[1][130];
-    w->S[83] = w->S[83] + w->fh[60]*w->term[1][131];
+    w->S[81] = w->S[81] + fh_pairs[116]*w->term[1][129];
+    w->S[82] = w->S[82] + fh_pairs[118]*w->term[1][130];
+    w->S[83] = w->S[83] + fh_pairs[120]*w->term[1][131];
     w->S[90] = w->S[90] + c_out;
     w->S[153] = c_out;
     w->S[119] = w->S[119] + c_out;
-    w->S[126] = c_out + w->fh[67]*w->term[1][126];
-    w->S[127] = c_out + w->fh[68]*w->term[1][127];
-    w->S[128] = c_out + w->fh[69]*w->term[1][128];
-    w->S[129] = c_out + w->fh[70]*w->term[1][129];
-    w->S[130] = c_out + w->fh[71]*w->term[1][130];
-    w->S[131] = c_out + w->fh[72]*w->term[1][131];
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[134], fh_pairs[136]),
+                lane_pair_load(&w->term[1][126]));
+        lane_pair_store(&w->S[126], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[138], fh_pairs[140]),
+                lane_pair_load(&w->term[1][128]));
+        lane_pair_store(&w->S[128], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[142], fh_pairs[144]),
+                lane_pair_load(&w->term[1][130]));
+        lane_pair_store(&w->S[130], pair);
+    }
 }
 
 ENU_DOPPLER18_BLOCK void horner_unit_columns(enu_doppler18_discretize_scratch *restrict w)
 {
+    const enu_doppler18_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
-                lane_pair_load(&w->fh[15]));
+                lane_pair_of(fh_pairs[30], fh_pairs[32]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
-                lane_pair_load(&w->fh[26]));
+                lane_pair_of(fh_pairs[52], fh_pairs[54]));
         lane_pair_store(&w->S[132], pair);
     }
-    w->S[134] = w->term[1][0]*w->fh[6] + w->term[1][1]*w->fh[17] + w->term[1][2]*w->fh[28];
+    w->S[134] = w->term[1][0]*fh_pairs[12] + w->term[1][1]*fh_pairs[34] +
+            w->term[1][2]*fh_pairs[56];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][14], w->term[1][14]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][15], w->term[1][15]),
-                lane_pair_load(&w->fh[15]));
+                lane_pair_of(fh_pairs[30], fh_pairs[32]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][16], w->term[1][16]),
-                lane_pair_load(&w->fh[26]));
+                lane_pair_of(fh_pairs[52], fh_pairs[54]));
         lane_pair_store(&w->S[135], pair);
     }
-    w->S[137] = w->term[1][14]*w->fh[6] + w->term[1][15]*w->fh[17] + w->term[1][16]*w->fh[28];
+    w->S[137] = w->term[1][14]*fh_pairs[12] + w->term[1][15]*fh_pairs[34] +
+            w->term[1][16]*fh_pairs[56];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][28], w->term[1][28]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][29], w->term[1][29]),
-                lane_pair_load(&w->fh[15]));
+                lane_pair_of(fh_pairs[30], fh_pairs[32]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][30], w->term[1][30]),
-                lane_pair_load(&w->fh[26]));
+                lane_pair_of(fh_pairs[52], fh_pairs[54]));
         lane_pair_store(&w->S[138], pair);
     }
-    w->S[140] = w->term[1][28]*w->fh[6] + w->term[1][29]*w->fh[17] + w->term[1][30]*w->fh[28];
+    w->S[140] = w->term[1][28]*fh_pairs[12] + w->term[1][29]*fh_pairs[34] +
+            w->term[1][30]*fh_pairs[56];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][42], w->term[1][42]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][43], w->term[1][43]),
-                lane_pair_load(&w->fh[15]));
+                lane_pair_of(fh_pairs[30], fh_pairs[32]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][44], w->term[1][44]),
-                lane_pair_load(&w->fh[26]));
+                lane_pair_of(fh_pairs[52], fh_pairs[54]));
         lane_pair_store(&w->S[141], pair);
     }
-    w->S[143] = w->term[1][42]*w->fh[6] + w->term[1][43]*w->fh[17] + w->term[1][44]*w->fh[28];
+    w->S[143] = w->term[1][42]*fh_pairs[12] + w->term[1][43]*fh_pairs[34] +
+            w->term[1][44]*fh_pairs[56];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][56], w->term[1][56]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][57], w->term[1][57]),
-                lane_pair_load(&w->fh[15]));
+                lane_pair_of(fh_pairs[30], fh_pairs[32]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][58], w->term[1][58]),
-                lane_pair_load(&w->fh[26]));
+                lane_pair_of(fh_pairs[52], fh_pairs[54]));
         lane_pair_store(&w->S[144], pair);
     }
-    w->S[146] = w->term[1][56]*w->fh[6] + w->term[1][57]*w->fh[17] + w->term[1][58]*w->fh[28];
+    w->S[146] = w->term[1][56]*fh_pairs[12] + w->term[1][57]*fh_pairs[34] +
+            w->term[1][58]*fh_pairs[56];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][70], w->term[1][70]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][71], w->term[1][71]),
-                lane_pair_load(&w->fh[15]));
+                lane_pair_of(fh_pairs[30], fh_pairs[32]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][72], w->term[1][72]),
-                lane_pair_load(&w->fh[26]));
+                lane_pair_of(fh_pairs[52], fh_pairs[54]));
         lane_pair_store(&w->S[147], pair);
     }
-    w->S[149] = w->term[1][70]*w->fh[6] + w->term[1][71]*w->fh[17] + w->term[1][72]*w->fh[28];
+    w->S[149] = w->term[1][70]*fh_pairs[12] + w->term[1][71]*fh_pairs[34] +
+            w->term[1][72]*fh_pairs[56];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][84], w->term[1][84]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][85], w->term[1][85]),
-                lane_pair_load(&w->fh[15]));
+                lane_pair_of(fh_pairs[30], fh_pairs[32]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][86], w->term[1][86]),
-                lane_pair_load(&w->fh[26]));
+                lane_pair_of(fh_pairs[52], fh_pairs[54]));
         lane_pair_store(&w->S[150], pair);
     }
-    w->S[152] = w->term[1][84]*w->fh[6] + w->term[1][85]*w->fh[17] + w->term[1][86]*w->fh[28];
+    w->S[152] = w->term[1][84]*fh_pairs[12] + w->term[1][85]*fh_pairs[34] +
+            w->term[1][86]*fh_pairs[56];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][98], w->term[1][98]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][99], w->term[1][99]),
-                lane_pair_load(&w->fh[15]));
+                lane_pair_of(fh_pairs[30], fh_pairs[32]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][100], w->term[1][100]),
-                lane_pair_load(&w->fh[26]));
+                lane_pair_of(fh_pairs[52], fh_pairs[54]));
         lane_pair_store(&w->S[154], pair);
     }
-    w->S[156] = w->term[1][98]*w->fh[6] + w->term[1][99]*w->fh[17] + w->term[1][100]*w->fh[28];
+    w->S[156] = w->term[1][98]*fh_pairs[12] + w->term[1][99]*fh_pairs[34] +
+            w->term[1][100]*fh_pairs[56];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][112], w->term[1][112]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][113], w->term[1][113]),
-                lane_pair_load(&w->fh[15]));
+                lane_pair_of(fh_pairs[30], fh_pairs[32]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][114], w->term[1][114]),
-                lane_pair_load(&w->fh[26]));
+                lane_pair_of(fh_pairs[52], fh_pairs[54]));
         lane_pair_store(&w->S[157], pair);
     }
-    w->S[159] = w->term[1][112]*w->fh[6] + w->term[1][113]*w->fh[17] + w->term[1][114]*w->fh[28];
+    w->S[159] = w->term[1][112]*fh_pairs[12] + w->term[1][113]*fh_pairs[34] +
+            w->term[1][114]*fh_pairs[56];
 }
 
 ENU_DOPPLER18_BLOCK void horner_transition(enu_doppler18_transition *restrict t, const
         enu_doppler18_discretize_scratch *restrict w)
 {
     const enu_doppler18_scalar one = 1.0;
+    const enu_doppler18_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
     for (k = 0; k < 7; ++k) {
-        t->Phi[k] = w->fh[0]*w->S[14+k] + w->fh[1]*w->S[28+k] + w->fh[2]*w->S[56+k] +
-                w->fh[3]*w->S[112+k];
+        t->Phi[k] = fh_pairs[0]*w->S[14+k] + fh_pairs[2]*w->S[28+k] + fh_pairs[4]*w->S[56+k] +
+                fh_pairs[6]*w->S[112+k];
     }
     for (k = 0; k < 1; ++k) {
-        t->Phi[7+k] = w->fh[0]*w->S[21+k] + w->fh[1]*w->S[35+k] + w->fh[2]*w->S[63+k] +
-                w->fh[3]*w->S[119+k];
+        t->Phi[7+k] = fh_pairs[0]*w->S[21+k] + fh_pairs[2]*w->S[35+k] + fh_pairs[4]*w->S[63+k] +
+                fh_pairs[6]*w->S[119+k];
     }
-    for (k = 0; k < 6; ++k) {
-        t->Phi[11+k] = w->fh[0]*w->S[22+k] + w->fh[1]*w->S[36+k] + w->fh[2]*w->S[64+k] +
-                w->fh[3]*w->S[120+k];
-    }
-    for (k = 0; k < 7; ++k) {
-        t->Phi[17+k] = w->fh[10]*w->S[k] + w->fh[11]*w->S[28+k] + w->fh[12]*w->S[42+k] +
-                w->fh[13]*w->S[84+k] + w->fh[14]*w->S[112+k];
-    }
-    for (k = 0; k < 1; ++k) {
-        t->Phi[24+k] = w->fh[10]*w->S[7+k] + w->fh[11]*w->S[35+k] + w->fh[12]*w->S[49+k] +
-                w->fh[13]*w->S[91+k] + w->fh[14]*w->S[119+k];
-    }
-    for (k = 0; k < 6; ++k) {
-        t->Phi[28+k] = w->fh[10]*w->S[8+k] + w->fh[11]*w->S[36+k] + w->fh[12]*w->S[50+k] +
-                w->fh[13]*w->S[92+k] + w->fh[14]*w->S[120+k];
-    }
-    for (k = 0; k < 7; ++k) {
-        t->Phi[34+k] = w->fh[21]*w->S[k] + w->fh[22]*w->S[14+k] + w->fh[23]*w->S[42+k] +
-                w->fh[24]*w->S[84+k] + w->fh[25]*w->S[112+k];
-    }
-    for (k = 0; k < 1; ++k) {
-        t->Phi[41+k] = w->fh[21]*w->S[7+k] + w->fh[22]*w->S[21+k] + w->fh[23]*w->S[49+k] +
-                w->fh[24]*w->S[91+k] + w->fh[25]*w->S[119+k];
-    }
-    for (k = 0; k < 6; ++k) {
-        t->Phi[45+k] = w->fh[21]*w->S[8+k] + w->fh[22]*w->S[22+k] + w->fh[23]*w->S[50+k] +
-                w->fh[24]*w->S[92+k] + w->fh[25]*w->S[120+k];
-    }
-    for (k = 0; k < 7; ++k) {
-        t->Phi[51+k] = w->fh[32]*w->S[14+k] + w->fh[33]*w->S[28+k] + w->fh[34]*w->S[42+k] +
-                w->fh[35]*w->S[56+k] + w->fh[36]*w->S[70+k] + w->fh[37]*w->S[84+k] +
-                w->fh[38]*w->S[112+k];
-    }
-    for (k = 0; k < 1; ++k) {
-        t->Phi[58+k] = w->fh[32]*w->S[21+k] + w->fh[33]*w->S[35+k] + w->fh[34]*w->S[49+k] +
-                w->fh[35]*w->S[63+k] + w->fh[36]*w->S[77+k] + w->fh[37]*w->S[91+k] +
-                w->fh[38]*w->S[119+k];
-    }
-    for (k = 0; k < 6; ++k) {
-        t->Phi[62+k] = w->fh[32]*w->S[22+k] + w->fh[33]*w->S[36+k] + w->fh[34]*w->S[50+k] +
-                w->fh[35]*w->S[64+k] + w->fh[36]*w->S[78+k] + w->fh[37]*w->S[92+k] +
-                w->fh[38]*w->S[120+k];
-    }
-    for (k = 0; k < 7; ++k) {
-        t->Phi[68+k] = w->fh[42]*w->S[k] + w->fh[43]*w->S[28+k] + w->fh[44]*w->S[42+k] +
-                w->fh[45]*w->S[56+k] + w->fh[46]*w->S[70+k] + w->fh[47]*w->S[84+k] +
-                w->fh[48]*w->S[112+k];
-    }
-    for (k = 0; k < 1; ++k) {
-        t->Phi[75+k] = w->fh[42]*w->S[7+k] + w->fh[43]*w->S[35+k] + w->fh[44]*w->S[49+k] +
-                w->fh[45]*w->S[63+k] + w->fh[46]*w->S[77+k] + w->fh[47]*w->S[91+k] +
-                w->fh[48]*w->S[119+k];
-    }
-    for (k = 0; k < 6; ++k) {
-        t->Phi[79+k] = w->fh[42]*w->S[8+k] + w->fh[43]*w->S[36+k] + w->fh[44]*w->S[50+k] +
-                w->fh[45]*w->S[64+k] + w->fh[46]*w->S[78+k] + w->fh[47]*w->S[92+k] +
-                w->fh[48]*w->S[120+k];
-    }
-    for (k = 0; k < 7; ++k) {
-        t->Phi[85+k] = w->fh[52]*w->S[k] + w->fh[53]*w->S[14+k] + w->fh[54]*w->S[42+k] +
-                w->fh[55]*w->S[56+k] + w->fh[56]*w->S[84+k] + w->fh[57]*w->S[112+k];
-    }
-    for (k = 0; k < 1; ++k) {
-        t->Phi[92+k] = w->fh[52]*w->S[7+k] + w->fh[53]*w->S[21+k] + w->fh[54]*w->S[49+k] +
-                w->fh[55]*w->S[63+k] + w->fh[56]*w->S[91+k] + w->fh[57]*w->S[119+k];
-    }
-    for (k = 0; k < 6; ++k) {
-        t->Phi[96+k] = w->fh[52]*w->S[8+k] + w->fh[53]*w->S[22+k] + w->fh[54]*w->S[50+k] +
-                w->fh[55]*w->S[64+k] + w->fh[56]*w->S[92+k] + w->fh[57]*w->S[120+k];
-    }
-    for (k = 0; k < 7; ++k) {
-        t->Phi[102+k] = w->fh[61]*w->S[56+k] + w->fh[62]*w->S[112+k];
-    }
-    for (k = 0; k < 1; ++k) {
-        t->Phi[109+k] = w->fh[61]*w->S[63+k] + w->fh[62]*w->S[119+k];
-    }
-    for (k = 0; k < 6; ++k) {
-        t->Phi[113+k] = w->fh[61]*w->S[64+k] + w->fh[62]*w->S[120+k];
-    }
-    for (k = 0; k < 7; ++k) {
-        t->Phi[119+k] = w->fh[63]*w->S[42+k] + w->fh[64]*w->S[84+k] + w->fh[65]*w->S[112+k];
-    }
-    for (k = 0; k < 1; ++k) {
-        t->Phi[127+k] = w->fh[63]*w->S[49+k] + w->fh[64]*w->S[91+k] + w->fh[65]*w->S[119+k];
-    }
-    for (k = 0; k < 6; ++k) {
-        t->Phi[131+k] = w->fh[63]*w->S[50+k] + w->fh[64]*w->S[92+k] + w->fh[65]*w->S[120+k];
-    }
-    for (k = 0; k < 7; ++k) {
-        t->Phi[137+k] = w->fh[66]*w->S[70+k];
-    }
-    for (k = 0; k < 1; ++k) {
-        t->Phi[144+k] = w->fh[66]*w->S[77+k];
-    }
-    for (k = 0; k < 6; ++k) {
-        t->Phi[148+k] = w->fh[66]*w->S[78+k];
-    }
-    t->Phi[11] = t->Phi[11] + w->fh[7]*w->S[126];
-    t->Phi[12] = t->Phi[12] + w->fh[8]*w->S[127];
-    t->Phi[13] = t->Phi[13] + w->fh[9]*w->S[128];
-    t->Phi[28] = t->Phi[28] + w->fh[18]*w->S[126];
-    t->Phi[29] = t->Phi[29] + w->fh[19]*w->S[127];
-    t->Phi[30] = t->Phi[30] + w->fh[20]*w->S[128];
-    t->Phi[45] = t->Phi[45] + w->fh[29]*w->S[126];
-    t->Phi[46] = t->Phi[46] + w->fh[30]*w->S[127];
-    t->Phi[47] = t->Phi[47] + w->fh[31]*w->S[128];
-    t->Phi[65] = t->Phi[65] + w->fh[39]*w->S[129];
-    t->Phi[66] = t->Phi[66] + w->fh[40]*w->S[130];
-    t->Phi[67] = t->Phi[67] + w->fh[41]*w->S[131];
-    t->Phi[82] = t->Phi[82] + w->fh[49]*w->S[129];
-    t->Phi[83] = t->Phi[83] + w->fh[50]*w->S[130];
-    t->Phi[84] = t->Phi[84] + w->fh[51]*w->S[131];
-    t->Phi[99] = t->Phi[99] + w->fh[58]*w->S[129];
-    t->Phi[100] = t->Phi[100] + w->fh[59]*w->S[130];
-    t->Phi[101] = t->Phi[101] + w->fh[60]*w->S[131];
-    t->Phi[157] = w->fh[67]*w->S[126];
-    t->Phi[158] = w->fh[68]*w->S[127];
-    t->Phi[159] = w->fh[69]*w->S[128];
-    t->Phi[160] = w->fh[70]*w->S[129];
-    t->Phi[161] = w->fh[71]*w->S[130];
-    t->Phi[162] = w->fh[72]*w->S[131];
     {
-        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
-                lane_pair_load(&w->fh[4]));
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[36]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[64]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[120]));
+        lane_pair_store(&t->Phi[11], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[24]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[122]));
+        lane_pair_store(&t->Phi[13], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[40]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[68]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[124]));
+        lane_pair_store(&t->Phi[15], lanes);
+    }
+    for (k = 0; k < 7; ++k) {
+        t->Phi[17+k] = fh_pairs[20]*w->S[k] + fh_pairs[22]*w->S[28+k] + fh_pairs[24]*w->S[42+k] +
+                fh_pairs[26]*w->S[84+k] + fh_pairs[28]*w->S[112+k];
+    }
+    for (k = 0; k < 1; ++k) {
+        t->Phi[24+k] = fh_pairs[20]*w->S[7+k] + fh_pairs[22]*w->S[35+k] + fh_pairs[24]*w->S[49+k] +
+                fh_pairs[26]*w->S[91+k] + fh_pairs[28]*w->S[119+k];
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[8]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[36]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->S[92]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[28]),
+                lane_pair_load(&w->S[120]));
+        lane_pair_store(&t->Phi[28], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->S[94]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[28]),
+                lane_pair_load(&w->S[122]));
+        lane_pair_store(&t->Phi[30], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[12]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[40]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->S[96]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[28]),
+                lane_pair_load(&w->S[124]));
+        lane_pair_store(&t->Phi[32], lanes);
+    }
+    for (k = 0; k < 7; ++k) {
+        t->Phi[34+k] = fh_pairs[42]*w->S[k] + fh_pairs[44]*w->S[14+k] + fh_pairs[46]*w->S[42+k] +
+                fh_pairs[48]*w->S[84+k] + fh_pairs[50]*w->S[112+k];
+    }
+    for (k = 0; k < 1; ++k) {
+        t->Phi[41+k] = fh_pairs[42]*w->S[7+k] + fh_pairs[44]*w->S[21+k] + fh_pairs[46]*w->S[49+k] +
+                fh_pairs[48]*w->S[91+k] + fh_pairs[50]*w->S[119+k];
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[42]), lane_pair_load(&w->S[8]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->S[92]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[120]));
+        lane_pair_store(&t->Phi[45], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[42]), lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[24]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->S[94]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[122]));
+        lane_pair_store(&t->Phi[47], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[42]), lane_pair_load(&w->S[12]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->S[96]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[124]));
+        lane_pair_store(&t->Phi[49], lanes);
+    }
+    for (k = 0; k < 7; ++k) {
+        t->Phi[51+k] = fh_pairs[64]*w->S[14+k] + fh_pairs[66]*w->S[28+k] + fh_pairs[68]*w->S[42+k] +
+                fh_pairs[70]*w->S[56+k] + fh_pairs[72]*w->S[70+k] + fh_pairs[74]*w->S[84+k] +
+                fh_pairs[76]*w->S[112+k];
+    }
+    for (k = 0; k < 1; ++k) {
+        t->Phi[58+k] = fh_pairs[64]*w->S[21+k] + fh_pairs[66]*w->S[35+k] + fh_pairs[68]*w->S[49+k] +
+                fh_pairs[70]*w->S[63+k] + fh_pairs[72]*w->S[77+k] + fh_pairs[74]*w->S[91+k] +
+                fh_pairs[76]*w->S[119+k];
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[64]), lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[36]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[68]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->S[64]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[72]),
+                lane_pair_load(&w->S[78]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[74]),
+                lane_pair_load(&w->S[92]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[120]));
+        lane_pair_store(&t->Phi[62], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[64]), lane_pair_load(&w->S[24]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[68]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->S[66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[72]),
+                lane_pair_load(&w->S[80]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[74]),
+                lane_pair_load(&w->S[94]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[122]));
+        lane_pair_store(&t->Phi[64], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[64]), lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[40]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[68]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->S[68]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[72]),
+                lane_pair_load(&w->S[82]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[74]),
+                lane_pair_load(&w->S[96]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[124]));
+        lane_pair_store(&t->Phi[66], lanes);
+    }
+    for (k = 0; k < 7; ++k) {
+        t->Phi[68+k] = fh_pairs[84]*w->S[k] + fh_pairs[86]*w->S[28+k] + fh_pairs[88]*w->S[42+k] +
+                fh_pairs[90]*w->S[56+k] + fh_pairs[92]*w->S[70+k] + fh_pairs[94]*w->S[84+k] +
+                fh_pairs[96]*w->S[112+k];
+    }
+    for (k = 0; k < 1; ++k) {
+        t->Phi[75+k] = fh_pairs[84]*w->S[7+k] + fh_pairs[86]*w->S[35+k] + fh_pairs[88]*w->S[49+k] +
+                fh_pairs[90]*w->S[63+k] + fh_pairs[92]*w->S[77+k] + fh_pairs[94]*w->S[91+k] +
+                fh_pairs[96]*w->S[119+k];
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[84]), lane_pair_load(&w->S[8]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[86]),
+                lane_pair_load(&w->S[36]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[88]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[90]),
+                lane_pair_load(&w->S[64]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[92]),
+                lane_pair_load(&w->S[78]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->S[92]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[96]),
+                lane_pair_load(&w->S[120]));
+        lane_pair_store(&t->Phi[79], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[84]), lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[86]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[88]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[90]),
+                lane_pair_load(&w->S[66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[92]),
+                lane_pair_load(&w->S[80]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->S[94]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[96]),
+                lane_pair_load(&w->S[122]));
+        lane_pair_store(&t->Phi[81], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[84]), lane_pair_load(&w->S[12]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[86]),
+                lane_pair_load(&w->S[40]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[88]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[90]),
+                lane_pair_load(&w->S[68]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[92]),
+                lane_pair_load(&w->S[82]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->S[96]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[96]),
+                lane_pair_load(&w->S[124]));
+        lane_pair_store(&t->Phi[83], lanes);
+    }
+    for (k = 0; k < 7; ++k) {
+        t->Phi[85+k] = fh_pairs[104]*w->S[k] + fh_pairs[106]*w->S[14+k] + fh_pairs[108]*w->S[42+k] +
+                fh_pairs[110]*w->S[56+k] + fh_pairs[112]*w->S[84+k] + fh_pairs[114]*w->S[112+k];
+    }
+    for (k = 0; k < 1; ++k) {
+        t->Phi[92+k] = fh_pairs[104]*w->S[7+k] + fh_pairs[106]*w->S[21+k] + fh_pairs[108]*w->S[49+k]
+                + fh_pairs[110]*w->S[63+k] + fh_pairs[112]*w->S[91+k] + fh_pairs[114]*w->S[119+k];
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[104]), lane_pair_load(&w->S[8]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[106]),
+                lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[108]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[110]),
+                lane_pair_load(&w->S[64]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->S[92]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[120]));
+        lane_pair_store(&t->Phi[96], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[104]),
+                lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[106]),
+                lane_pair_load(&w->S[24]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[108]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[110]),
+                lane_pair_load(&w->S[66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->S[94]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[122]));
+        lane_pair_store(&t->Phi[98], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[104]),
+                lane_pair_load(&w->S[12]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[106]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[108]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[110]),
+                lane_pair_load(&w->S[68]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->S[96]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[124]));
+        lane_pair_store(&t->Phi[100], lanes);
+    }
+    for (k = 0; k < 7; ++k) {
+        t->Phi[102+k] = fh_pairs[122]*w->S[56+k] + fh_pairs[124]*w->S[112+k];
+    }
+    for (k = 0; k < 1; ++k) {
+        t->Phi[109+k] = fh_pairs[122]*w->S[63+k] + fh_pairs[124]*w->S[119+k];
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[122]),
+                lane_pair_load(&w->S[64]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[124]),
+                lane_pair_load(&w->S[120]));
+        lane_pair_store(&t->Phi[113], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[122]),
+                lane_pair_load(&w->S[66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[124]),
+                lane_pair_load(&w->S[122]));
+        lane_pair_store(&t->Phi[115], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[122]),
+                lane_pair_load(&w->S[68]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[124]),
+                lane_pair_load(&w->S[124]));
+        lane_pair_store(&t->Phi[117], lanes);
+    }
+    for (k = 0; k < 7; ++k) {
+        t->Phi[119+k] = fh_pairs[126]*w->S[42+k] + fh_pairs[128]*w->S[84+k] +
+                fh_pairs[130]*w->S[112+k];
+    }
+    for (k = 0; k < 1; ++k) {
+        t->Phi[127+k] = fh_pairs[126]*w->S[49+k] + fh_pairs[128]*w->S[91+k] +
+                fh_pairs[130]*w->S[119+k];
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[126]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[128]),
+                lane_pair_load(&w->S[92]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[130]),
+                lane_pair_load(&w->S[120]));
+        lane_pair_store(&t->Phi[131], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[126]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[128]),
+                lane_pair_load(&w->S[94]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[130]),
+                lane_pair_load(&w->S[122]));
+        lane_pair_store(&t->Phi[133], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[126]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[128]),
+                lane_pair_load(&w->S[96]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[130]),
+                lane_pair_load(&w->S[124]));
+        lane_pair_store(&t->Phi[135], lanes);
+    }
+    for (k = 0; k < 7; ++k) {
+        t->Phi[137+k] = fh_pairs[132]*w->S[70+k];
+    }
+    for (k = 0; k < 1; ++k) {
+        t->Phi[144+k] = fh_pairs[132]*w->S[77+k];
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[132]),
+                lane_pair_load(&w->S[78]));
+        lane_pair_store(&t->Phi[148], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[132]),
+                lane_pair_load(&w->S[80]));
+        lane_pair_store(&t->Phi[150], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[132]),
+                lane_pair_load(&w->S[82]));
+        lane_pair_store(&t->Phi[152], lanes);
+    }
+    t->Phi[11] = t->Phi[11] + fh_pairs[14]*w->S[126];
+    t->Phi[12] = t->Phi[12] + fh_pairs[16]*w->S[127];
+    t->Phi[13] = t->Phi[13] + fh_pairs[18]*w->S[128];
+    t->Phi[28] = t->Phi[28] + fh_pairs[36]*w->S[126];
+    t->Phi[29] = t->Phi[29] + fh_pairs[38]*w->S[127];
+    t->Phi[30] = t->Phi[30] + fh_pairs[40]*w->S[128];
+    t->Phi[45] = t->Phi[45] + fh_pairs[58]*w->S[126];
+    t->Phi[46] = t->Phi[46] + fh_pairs[60]*w->S[127];
+    t->Phi[47] = t->Phi[47] + fh_pairs[62]*w->S[128];
+    t->Phi[65] = t->Phi[65] + fh_pairs[78]*w->S[129];
+    t->Phi[66] = t->Phi[66] + fh_pairs[80]*w->S[130];
+    t->Phi[67] = t->Phi[67] + fh_pairs[82]*w->S[131];
+    t->Phi[82] = t->Phi[82] + fh_pairs[98]*w->S[129];
+    t->Phi[83] = t->Phi[83] + fh_pairs[100]*w->S[130];
+    t->Phi[84] = t->Phi[84] + fh_pairs[102]*w->S[131];
+    t->Phi[99] = t->Phi[99] + fh_pairs[116]*w->S[129];
+    t->Phi[100] = t->Phi[100] + fh_pairs[118]*w->S[130];
+    t->Phi[101] = t->Phi[101] + fh_pairs[120]*w->S[131];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[134], fh_pairs[136]),
+                lane_pair_load(&w->S[126]));
+        lane_pair_store(&t->Phi[157], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[138], fh_pairs[140]),
+                lane_pair_load(&w->S[128]));
+        lane_pair_store(&t->Phi[159], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[142], fh_pairs[144]),
+                lane_pair_load(&w->S[130]));
+        lane_pair_store(&t->Phi[161], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]), lane_pair_of(fh_pairs[8],
+                fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
-                lane_pair_load(&w->fh[15]));
+                lane_pair_of(fh_pairs[30], fh_pairs[32]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
-                lane_pair_load(&w->fh[26]));
+                lane_pair_of(fh_pairs[52], fh_pairs[54]));
         lane_pair_store(&t->Phi[8], pair);
     }
-    t->Phi[10] = w->S[0]*w->fh[6] + w->S[1]*w->fh[17] + w->S[2]*w->fh[28];
+    t->Phi[10] = w->S[0]*fh_pairs[12] + w->S[1]*fh_pairs[34] + w->S[2]*fh_pairs[56];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[14], w->S[14]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[15], w->S[15]),
-                lane_pair_load(&w->fh[15]));
+                lane_pair_of(fh_pairs[30], fh_pairs[32]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[16], w->S[16]),
-                lane_pair_load(&w->fh[26]));
+                lane_pair_of(fh_pairs[52], fh_pairs[54]));
         lane_pair_store(&t->Phi[25], pair);
     }
-    t->Phi[27] = w->S[14]*w->fh[6] + w->S[15]*w->fh[17] + w->S[16]*w->fh[28];
+    t->Phi[27] = w->S[14]*fh_pairs[12] + w->S[15]*fh_pairs[34] + w->S[16]*fh_pairs[56];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[28], w->S[28]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[29], w->S[29]),
-                lane_pair_load(&w->fh[15]));
+                lane_pair_of(fh_pairs[30], fh_pairs[32]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[30], w->S[30]),
-                lane_pair_load(&w->fh[26]));
+                lane_pair_of(fh_pairs[52], fh_pairs[54]));
         lane_pair_store(&t->Phi[42], pair);
     }
-    t->Phi[44] = w->S[28]*w->fh[6] + w->S[29]*w->fh[17] + w->S[30]*w->fh[28];
+    t->Phi[44] = w->S[28]*fh_pairs[12] + w->S[29]*fh_pairs[34] + w->S[30]*fh_pairs[56];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[42], w->S[42]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[43], w->S[43]),
-                lane_pair_load(&w->fh[15]));
+                lane_pair_of(fh_pairs[30], fh_pairs[32]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[44], w->S[44]),
-                lane_pair_load(&w->fh[26]));
+                lane_pair_of(fh_pairs[52], fh_pairs[54]));
         lane_pair_store(&t->Phi[59], pair);
     }
-    t->Phi[61] = w->S[42]*w->fh[6] + w->S[43]*w->fh[17] + w->S[44]*w->fh[28];
+    t->Phi[61] = w->S[42]*fh_pairs[12] + w->S[43]*fh_pairs[34] + w->S[44]*fh_pairs[56];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[56], w->S[56]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[57], w->S[57]),
-                lane_pair_load(&w->fh[15]));
+                lane_pair_of(fh_pairs[30], fh_pairs[32]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[58], w->S[58]),
-                lane_pair_load(&w->fh[26]));
+                lane_pair_of(fh_pairs[52], fh_pairs[54]));
         lane_pair_store(&t->Phi[76], pair);
     }
-    t->Phi[78] = w->S[56]*w->fh[6] + w->S[57]*w->fh[17] + w->S[58]*w->fh[28];
+    t->Phi[78] = w->S[56]*fh_pairs[12] + w->S[57]*fh_pairs[34] + w->S[58]*fh_pairs[56];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[70], w->S[70]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[71], w->S[71]),
-                lane_pair_load(&w->fh[15]));
+                lane_pair_of(fh_pairs[30], fh_pairs[32]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[72], w->S[72]),
-                lane_pair_load(&w->fh[26]));
+                lane_pair_of(fh_pairs[52], fh_pairs[54]));
         lane_pair_store(&t->Phi[93], pair);
     }
-    t->Phi[95] = w->S[70]*w->fh[6] + w->S[71]*w->fh[17] + w->S[72]*w->fh[28];
+    t->Phi[95] = w->S[70]*fh_pairs[12] + w->S[71]*fh_pairs[34] + w->S[72]*fh_pairs[56];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[84], w->S[84]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[85], w->S[85]),
-                lane_pair_load(&w->fh[15]));
+                lane_pair_of(fh_pairs[30], fh_pairs[32]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[86], w->S[86]),
-                lane_pair_load(&w->fh[26]));
+                lane_pair_of(fh_pairs[52], fh_pairs[54]));
         lane_pair_store(&t->Phi[110], pair);
     }
-    t->Phi[112] = w->S[84]*w->fh[6] + w->S[85]*w->fh[17] + w->S[86]*w->fh[28];
+    t->Phi[112] = w->S[84]*fh_pairs[12] + w->S[85]*fh_pairs[34] + w->S[86]*fh_pairs[56];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[98], w->S[98]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[99], w->S[99]),
-                lane_pair_load(&w->fh[15]));
+                lane_pair_of(fh_pairs[30], fh_pairs[32]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[100], w->S[100]),
-                lane_pair_load(&w->fh[26]));
+                lane_pair_of(fh_pairs[52], fh_pairs[54]));
         lane_pair_store(&t->Phi[128], pair);
     }
-    t->Phi[130] = w->S[98]*w->fh[6] + w->S[99]*w->fh[17] + w->S[100]*w->fh[28];
+    t->Phi[130] = w->S[98]*fh_pairs[12] + w->S[99]*fh_pairs[34] + w->S[100]*fh_pairs[56];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[112], w->S[112]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[113], w->S[113]),
-                lane_pair_load(&w->fh[15]));
+                lane_pair_of(fh_pairs[30], fh_pairs[32]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[114], w->S[114]),
-                lane_pair_load(&w->fh[26]));
+                lane_pair_of(fh_pairs[52], fh_pairs[54]));
         lane_pair_store(&t->Phi[145], pair);
     }
-    t->Phi[147] = w->S[112]*w->fh[6] + w->S[113]*w->fh[17] + w->S[114]*w->fh[28];
+    t->Phi[147] = w->S[112]*fh_pairs[12] + w->S[113]*fh_pairs[34] + w->S[114]*fh_pairs[56];
     t->Phi[126] = 0;
-    t->Phi[154] = one;
-    t->Phi[155] = one;
+    {
+        lane_pair pair = lane_pair_of(one, one);
+        lane_pair_store(&t->Phi[154], pair);
+    }
     t->Phi[156] = one;
 }
 
@@ -2029,12 +2803,21 @@ ENU_DOPPLER18_BLOCK void doubling(enu_doppler18_transition *restrict t,
                 t->Phi[139]*t->Phi[45+k] + t->Phi[140]*t->Phi[62+k] + t->Phi[141]*t->Phi[79+k] +
                 t->Phi[142]*t->Phi[96+k] + t->Phi[143]*t->Phi[113+k] + t->Phi[144]*t->Phi[148+k];
     }
-    w->term[0][154] = t->Phi[157]*t->Phi[157];
-    w->term[0][155] = t->Phi[158]*t->Phi[158];
-    w->term[0][156] = t->Phi[159]*t->Phi[159];
-    w->term[0][157] = t->Phi[160]*t->Phi[160];
-    w->term[0][158] = t->Phi[161]*t->Phi[161];
-    w->term[0][159] = t->Phi[162]*t->Phi[162];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[157]),
+                lane_pair_load(&t->Phi[157]));
+        lane_pair_store(&w->term[0][154], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[159]),
+                lane_pair_load(&t->Phi[159]));
+        lane_pair_store(&w->term[0][156], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[161]),
+                lane_pair_load(&t->Phi[161]));
+        lane_pair_store(&w->term[0][158], pair);
+    }
     for (k = 0; k < 8; ++k) {
         w->term[1][k] = t->Phi[0]*w->S[k] + t->Phi[1]*w->S[14+k] + t->Phi[2]*w->S[28+k] +
                 t->Phi[3]*w->S[42+k] + t->Phi[4]*w->S[56+k] + t->Phi[5]*w->S[70+k] +
@@ -2175,467 +2958,1318 @@ ENU_DOPPLER18_BLOCK void doubling(enu_doppler18_transition *restrict t,
                 + t->Phi[140]*w->S[50+k] + t->Phi[141]*w->S[64+k] + t->Phi[142]*w->S[78+k] +
                 t->Phi[143]*w->S[92+k] + t->Phi[144]*w->S[120+k];
     }
-    w->term[1][154] = t->Phi[157]*w->S[126];
-    w->term[1][155] = t->Phi[158]*w->S[127];
-    w->term[1][156] = t->Phi[159]*w->S[128];
-    w->term[1][157] = t->Phi[160]*w->S[129];
-    w->term[1][158] = t->Phi[161]*w->S[130];
-    w->term[1][159] = t->Phi[162]*w->S[131];
-    w->term[0][11] = w->term[0][11] + t->Phi[11]*t->Phi[157];
-    w->term[0][12] = w->term[0][12] + t->Phi[12]*t->Phi[158];
-    w->term[0][13] = w->term[0][13] + t->Phi[13]*t->Phi[159];
-    w->term[0][14] = w->term[0][14] + t->Phi[14]*t->Phi[160];
-    w->term[0][15] = w->term[0][15] + t->Phi[15]*t->Phi[161];
-    w->term[0][16] = w->term[0][16] + t->Phi[16]*t->Phi[162];
-    w->term[0][28] = w->term[0][28] + t->Phi[28]*t->Phi[157];
-    w->term[0][29] = w->term[0][29] + t->Phi[29]*t->Phi[158];
-    w->term[0][30] = w->term[0][30] + t->Phi[30]*t->Phi[159];
-    w->term[0][31] = w->term[0][31] + t->Phi[31]*t->Phi[160];
-    w->term[0][32] = w->term[0][32] + t->Phi[32]*t->Phi[161];
-    w->term[0][33] = w->term[0][33] + t->Phi[33]*t->Phi[162];
-    w->term[0][45] = w->term[0][45] + t->Phi[45]*t->Phi[157];
-    w->term[0][46] = w->term[0][46] + t->Phi[46]*t->Phi[158];
-    w->term[0][47] = w->term[0][47] + t->Phi[47]*t->Phi[159];
-    w->term[0][48] = w->term[0][48] + t->Phi[48]*t->Phi[160];
-    w->term[0][49] = w->term[0][49] + t->Phi[49]*t->Phi[161];
-    w->term[0][50] = w->term[0][50] + t->Phi[50]*t->Phi[162];
-    w->term[0][62] = w->term[0][62] + t->Phi[62]*t->Phi[157];
-    w->term[0][63] = w->term[0][63] + t->Phi[63]*t->Phi[158];
-    w->term[0][64] = w->term[0][64] + t->Phi[64]*t->Phi[159];
-    w->term[0][65] = w->term[0][65] + t->Phi[65]*t->Phi[160];
-    w->term[0][66] = w->term[0][66] + t->Phi[66]*t->Phi[161];
-    w->term[0][67] = w->term[0][67] + t->Phi[67]*t->Phi[162];
-    w->term[0][79] = w->term[0][79] + t->Phi[79]*t->Phi[157];
-    w->term[0][80] = w->term[0][80] + t->Phi[80]*t->Phi[158];
-    w->term[0][81] = w->term[0][81] + t->Phi[81]*t->Phi[159];
-    w->term[0][82] = w->term[0][82] + t->Phi[82]*t->Phi[160];
-    w->term[0][83] = w->term[0][83] + t->Phi[83]*t->Phi[161];
-    w->term[0][84] = w->term[0][84] + t->Phi[84]*t->Phi[162];
-    w->term[0][96] = w->term[0][96] + t->Phi[96]*t->Phi[157];
-    w->term[0][97] = w->term[0][97] + t->Phi[97]*t->Phi[158];
-    w->term[0][98] = w->term[0][98] + t->Phi[98]*t->Phi[159];
-    w->term[0][99] = w->term[0][99] + t->Phi[99]*t->Phi[160];
-    w->term[0][100] = w->term[0][100] + t->Phi[100]*t->Phi[161];
-    w->term[0][101] = w->term[0][101] + t->Phi[101]*t->Phi[162];
-    w->term[0][113] = w->term[0][113] + t->Phi[113]*t->Phi[157];
-    w->term[0][114] = w->term[0][114] + t->Phi[114]*t->Phi[158];
-    w->term[0][115] = w->term[0][115] + t->Phi[115]*t->Phi[159];
-    w->term[0][116] = w->term[0][116] + t->Phi[116]*t->Phi[160];
-    w->term[0][117] = w->term[0][117] + t->Phi[117]*t->Phi[161];
-    w->term[0][118] = w->term[0][118] + t->Phi[118]*t->Phi[162];
-    w->term[0][131] = w->term[0][131] + t->Phi[131]*t->Phi[157];
-    w->term[0][132] = w->term[0][132] + t->Phi[132]*t->Phi[158];
-    w->term[0][133] = w->term[0][133] + t->Phi[133]*t->Phi[159];
-    w->term[0][134] = w->term[0][134] + t->Phi[134]*t->Phi[160];
-    w->term[0][135] = w->term[0][135] + t->Phi[135]*t->Phi[161];
-    w->term[0][136] = w->term[0][136] + t->Phi[136]*t->Phi[162];
-    w->term[0][148] = w->term[0][148] + t->Phi[148]*t->Phi[157];
-    w->term[0][149] = w->term[0][149] + t->Phi[149]*t->Phi[158];
-    w->term[0][150] = w->term[0][150] + t->Phi[150]*t->Phi[159];
-    w->term[0][151] = w->term[0][151] + t->Phi[151]*t->Phi[160];
-    w->term[0][152] = w->term[0][152] + t->Phi[152]*t->Phi[161];
-    w->term[0][153] = w->term[0][153] + t->Phi[153]*t->Phi[162];
-    w->term[1][8] = w->term[1][8] + t->Phi[8];
-    w->term[1][9] = w->term[1][9] + t->Phi[9];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[157]),
+                lane_pair_load(&w->S[126]));
+        lane_pair_store(&w->term[1][154], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[159]),
+                lane_pair_load(&w->S[128]));
+        lane_pair_store(&w->term[1][156], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[161]),
+                lane_pair_load(&w->S[130]));
+        lane_pair_store(&w->term[1][158], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][11]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[11]),
+                lane_pair_load(&t->Phi[157]));
+        lane_pair_store(&w->term[0][11], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][13]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[13]),
+                lane_pair_load(&t->Phi[159]));
+        lane_pair_store(&w->term[0][13], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][15]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[15]),
+                lane_pair_load(&t->Phi[161]));
+        lane_pair_store(&w->term[0][15], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][28]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[28]),
+                lane_pair_load(&t->Phi[157]));
+        lane_pair_store(&w->term[0][28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][30]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[30]),
+                lane_pair_load(&t->Phi[159]));
+        lane_pair_store(&w->term[0][30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][32]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[32]),
+                lane_pair_load(&t->Phi[161]));
+        lane_pair_store(&w->term[0][32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][45]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[45]),
+                lane_pair_load(&t->Phi[157]));
+        lane_pair_store(&w->term[0][45], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][47]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[47]),
+                lane_pair_load(&t->Phi[159]));
+        lane_pair_store(&w->term[0][47], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][49]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[49]),
+                lane_pair_load(&t->Phi[161]));
+        lane_pair_store(&w->term[0][49], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][62]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[62]),
+                lane_pair_load(&t->Phi[157]));
+        lane_pair_store(&w->term[0][62], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][64]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[64]),
+                lane_pair_load(&t->Phi[159]));
+        lane_pair_store(&w->term[0][64], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][66]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[66]),
+                lane_pair_load(&t->Phi[161]));
+        lane_pair_store(&w->term[0][66], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][79]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[79]),
+                lane_pair_load(&t->Phi[157]));
+        lane_pair_store(&w->term[0][79], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][81]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[81]),
+                lane_pair_load(&t->Phi[159]));
+        lane_pair_store(&w->term[0][81], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][83]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[83]),
+                lane_pair_load(&t->Phi[161]));
+        lane_pair_store(&w->term[0][83], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][96]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[96]),
+                lane_pair_load(&t->Phi[157]));
+        lane_pair_store(&w->term[0][96], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][98]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[98]),
+                lane_pair_load(&t->Phi[159]));
+        lane_pair_store(&w->term[0][98], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][100]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[100]),
+                lane_pair_load(&t->Phi[161]));
+        lane_pair_store(&w->term[0][100], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][113]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[113]),
+                lane_pair_load(&t->Phi[157]));
+        lane_pair_store(&w->term[0][113], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][115]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[115]),
+                lane_pair_load(&t->Phi[159]));
+        lane_pair_store(&w->term[0][115], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][117]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[117]),
+                lane_pair_load(&t->Phi[161]));
+        lane_pair_store(&w->term[0][117], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][131]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[131]),
+                lane_pair_load(&t->Phi[157]));
+        lane_pair_store(&w->term[0][131], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][133]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[133]),
+                lane_pair_load(&t->Phi[159]));
+        lane_pair_store(&w->term[0][133], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][135]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[135]),
+                lane_pair_load(&t->Phi[161]));
+        lane_pair_store(&w->term[0][135], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][148]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[148]),
+                lane_pair_load(&t->Phi[157]));
+        lane_pair_store(&w->term[0][148], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][150]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[150]),
+                lane_pair_load(&t->Phi[159]));
+        lane_pair_store(&w->term[0][150], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][152]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[152]),
+                lane_pair_load(&t->Phi[161]));
+        lane_pair_store(&w->term[0][152], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][8]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[8]));
+        lane_pair_store(&w->term[1][8], pair);
+    }
     w->term[1][10] = w->term[1][10] + t->Phi[10];
-    w->term[1][11] = w->term[1][11] + t->Phi[11]*w->S[126];
-    w->term[1][12] = w->term[1][12] + t->Phi[12]*w->S[127];
-    w->term[1][13] = w->term[1][13] + t->Phi[13]*w->S[128];
-    w->term[1][14] = w->term[1][14] + t->Phi[14]*w->S[129];
-    w->term[1][15] = w->term[1][15] + t->Phi[15]*w->S[130];
-    w->term[1][16] = w->term[1][16] + t->Phi[16]*w->S[131];
-    w->term[1][25] = w->term[1][25] + t->Phi[25];
-    w->term[1][26] = w->term[1][26] + t->Phi[26];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][11]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[11]), lane_pair_load(&w->S[126]));
+        lane_pair_store(&w->term[1][11], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][13]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[13]), lane_pair_load(&w->S[128]));
+        lane_pair_store(&w->term[1][13], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][15]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[15]), lane_pair_load(&w->S[130]));
+        lane_pair_store(&w->term[1][15], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][25]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[25]));
+        lane_pair_store(&w->term[1][25], pair);
+    }
     w->term[1][27] = w->term[1][27] + t->Phi[27];
-    w->term[1][28] = w->term[1][28] + t->Phi[28]*w->S[126];
-    w->term[1][29] = w->term[1][29] + t->Phi[29]*w->S[127];
-    w->term[1][30] = w->term[1][30] + t->Phi[30]*w->S[128];
-    w->term[1][31] = w->term[1][31] + t->Phi[31]*w->S[129];
-    w->term[1][32] = w->term[1][32] + t->Phi[32]*w->S[130];
-    w->term[1][33] = w->term[1][33] + t->Phi[33]*w->S[131];
-    w->term[1][42] = w->term[1][42] + t->Phi[42];
-    w->term[1][43] = w->term[1][43] + t->Phi[43];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][28]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[28]), lane_pair_load(&w->S[126]));
+        lane_pair_store(&w->term[1][28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][30]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[30]), lane_pair_load(&w->S[128]));
+        lane_pair_store(&w->term[1][30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][32]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[32]), lane_pair_load(&w->S[130]));
+        lane_pair_store(&w->term[1][32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][42]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[42]));
+        lane_pair_store(&w->term[1][42], pair);
+    }
     w->term[1][44] = w->term[1][44] + t->Phi[44];
-    w->term[1][45] = w->term[1][45] + t->Phi[45]*w->S[126];
-    w->term[1][46] = w->term[1][46] + t->Phi[46]*w->S[127];
-    w->term[1][47] = w->term[1][47] + t->Phi[47]*w->S[128];
-    w->term[1][48] = w->term[1][48] + t->Phi[48]*w->S[129];
-    w->term[1][49] = w->term[1][49] + t->Phi[49]*w->S[130];
-    w->term[1][50] = w->term[1][50] + t->Phi[50]*w->S[131];
-    w->term[1][59] = w->term[1][59] + t->Phi[59];
-    w->term[1][60] = w->term[1][60] + t->Phi[60];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][45]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[45]), lane_pair_load(&w->S[126]));
+        lane_pair_store(&w->term[1][45], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][47]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[47]), lane_pair_load(&w->S[128]));
+        lane_pair_store(&w->term[1][47], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][49]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[49]), lane_pair_load(&w->S[130]));
+        lane_pair_store(&w->term[1][49], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][59]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[59]));
+        lane_pair_store(&w->term[1][59], pair);
+    }
     w->term[1][61] = w->term[1][61] + t->Phi[61];
-    w->term[1][62] = w->term[1][62] + t->Phi[62]*w->S[126];
-    w->term[1][63] = w->term[1][63] + t->Phi[63]*w->S[127];
-    w->term[1][64] = w->term[1][64] + t->Phi[64]*w->S[128];
-    w->term[1][65] = w->term[1][65] + t->Phi[65]*w->S[129];
-    w->term[1][66] = w->term[1][66] + t->Phi[66]*w->S[130];
-    w->term[1][67] = w->term[1][67] + t->Phi[67]*w->S[131];
-    w->term[1][76] = w->term[1][76] + t->Phi[76];
-    w->term[1][77] = w->term[1][77] + t->Phi[77];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][62]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[62]), lane_pair_load(&w->S[126]));
+        lane_pair_store(&w->term[1][62], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][64]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[64]), lane_pair_load(&w->S[128]));
+        lane_pair_store(&w->term[1][64], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][66]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[66]), lane_pair_load(&w->S[130]));
+        lane_pair_store(&w->term[1][66], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][76]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[76]));
+        lane_pair_store(&w->term[1][76], pair);
+    }
     w->term[1][78] = w->term[1][78] + t->Phi[78];
-    w->term[1][79] = w->term[1][79] + t->Phi[79]*w->S[126];
-    w->term[1][80] = w->term[1][80] + t->Phi[80]*w->S[127];
-    w->term[1][81] = w->term[1][81] + t->Phi[81]*w->S[128];
-    w->term[1][82] = w->term[1][82] + t->Phi[82]*w->S[129];
-    w->term[1][83] = w->term[1][83] + t->Phi[83]*w->S[130];
-    w->term[1][84] = w->term[1][84] + t->Phi[84]*w->S[131];
-    w->term[1][93] = w->term[1][93] + t->Phi[93];
-    w->term[1][94] = w->term[1][94] + t->Phi[94];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][79]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[79]), lane_pair_load(&w->S[126]));
+        lane_pair_store(&w->term[1][79], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][81]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[81]), lane_pair_load(&w->S[128]));
+        lane_pair_store(&w->term[1][81], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][83]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[83]), lane_pair_load(&w->S[130]));
+        lane_pair_store(&w->term[1][83], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][93]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[93]));
+        lane_pair_store(&w->term[1][93], pair);
+    }
     w->term[1][95] = w->term[1][95] + t->Phi[95];
-    w->term[1][96] = w->term[1][96] + t->Phi[96]*w->S[126];
-    w->term[1][97] = w->term[1][97] + t->Phi[97]*w->S[127];
-    w->term[1][98] = w->term[1][98] + t->Phi[98]*w->S[128];
-    w->term[1][99] = w->term[1][99] + t->Phi[99]*w->S[129];
-    w->term[1][100] = w->term[1][100] + t->Phi[100]*w->S[130];
-    w->term[1][101] = w->term[1][101] + t->Phi[101]*w->S[131];
-    w->term[1][110] = w->term[1][110] + t->Phi[110];
-    w->term[1][111] = w->term[1][111] + t->Phi[111];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][96]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[96]), lane_pair_load(&w->S[126]));
+        lane_pair_store(&w->term[1][96], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][98]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[98]), lane_pair_load(&w->S[128]));
+        lane_pair_store(&w->term[1][98], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][100]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[100]),
+                lane_pair_load(&w->S[130]));
+        lane_pair_store(&w->term[1][100], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][110]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[110]));
+        lane_pair_store(&w->term[1][110], pair);
+    }
     w->term[1][112] = w->term[1][112] + t->Phi[112];
-    w->term[1][113] = w->term[1][113] + t->Phi[113]*w->S[126];
-    w->term[1][114] = w->term[1][114] + t->Phi[114]*w->S[127];
-    w->term[1][115] = w->term[1][115] + t->Phi[115]*w->S[128];
-    w->term[1][116] = w->term[1][116] + t->Phi[116]*w->S[129];
-    w->term[1][117] = w->term[1][117] + t->Phi[117]*w->S[130];
-    w->term[1][118] = w->term[1][118] + t->Phi[118]*w->S[131];
-    w->term[1][128] = w->term[1][128] + t->Phi[128];
-    w->term[1][129] = w->term[1][129] + t->Phi[129];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][113]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[113]),
+                lane_pair_load(&w->S[126]));
+        lane_pair_store(&w->term[1][113], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][115]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[115]),
+                lane_pair_load(&w->S[128]));
+        lane_pair_store(&w->term[1][115], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][117]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[117]),
+                lane_pair_load(&w->S[130]));
+        lane_pair_store(&w->term[1][117], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][128]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[128]));
+        lane_pair_store(&w->term[1][128], pair);
+    }
     w->term[1][130] = w->term[1][130] + t->Phi[130];
-    w->term[1][131] = w->term[1][131] + t->Phi[131]*w->S[126];
-    w->term[1][132] = w->term[1][132] + t->Phi[132]*w->S[127];
-    w->term[1][133] = w->term[1][133] + t->Phi[133]*w->S[128];
-    w->term[1][134] = w->term[1][134] + t->Phi[134]*w->S[129];
-    w->term[1][135] = w->term[1][135] + t->Phi[135]*w->S[130];
-    w->term[1][136] = w->term[1][136] + t->Phi[136]*w->S[131];
-    w->term[1][145] = w->term[1][145] + t->Phi[145];
-    w->term[1][146] = w->term[1][146] + t->Phi[146];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][131]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[131]),
+                lane_pair_load(&w->S[126]));
+        lane_pair_store(&w->term[1][131], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][133]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[133]),
+                lane_pair_load(&w->S[128]));
+        lane_pair_store(&w->term[1][133], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][135]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[135]),
+                lane_pair_load(&w->S[130]));
+        lane_pair_store(&w->term[1][135], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][145]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[145]));
+        lane_pair_store(&w->term[1][145], pair);
+    }
     w->term[1][147] = w->term[1][147] + t->Phi[147];
-    w->term[1][148] = w->term[1][148] + t->Phi[148]*w->S[126];
-    w->term[1][149] = w->term[1][149] + t->Phi[149]*w->S[127];
-    w->term[1][150] = w->term[1][150] + t->Phi[150]*w->S[128];
-    w->term[1][151] = w->term[1][151] + t->Phi[151]*w->S[129];
-    w->term[1][152] = w->term[1][152] + t->Phi[152]*w->S[130];
-    w->term[1][153] = w->term[1][153] + t->Phi[153]*w->S[131];
-    t->Phi[0] = t->Phi[0] + t->Phi[0] + w->term[0][0];
-    t->Phi[1] = t->Phi[1] + t->Phi[1] + w->term[0][1];
-    t->Phi[2] = t->Phi[2] + t->Phi[2] + w->term[0][2];
-    t->Phi[3] = t->Phi[3] + t->Phi[3] + w->term[0][3];
-    t->Phi[4] = t->Phi[4] + t->Phi[4] + w->term[0][4];
-    t->Phi[5] = t->Phi[5] + t->Phi[5] + w->term[0][5];
-    t->Phi[6] = t->Phi[6] + t->Phi[6] + w->term[0][6];
-    t->Phi[7] = t->Phi[7] + t->Phi[7] + w->term[0][7];
-    t->Phi[8] = t->Phi[8] + t->Phi[8] + w->term[0][8];
-    t->Phi[9] = t->Phi[9] + t->Phi[9] + w->term[0][9];
-    t->Phi[10] = t->Phi[10] + t->Phi[10] + w->term[0][10];
-    t->Phi[11] = t->Phi[11] + t->Phi[11] + w->term[0][11];
-    t->Phi[12] = t->Phi[12] + t->Phi[12] + w->term[0][12];
-    t->Phi[13] = t->Phi[13] + t->Phi[13] + w->term[0][13];
-    t->Phi[14] = t->Phi[14] + t->Phi[14] + w->term[0][14];
-    t->Phi[15] = t->Phi[15] + t->Phi[15] + w->term[0][15];
-    t->Phi[16] = t->Phi[16] + t->Phi[16] + w->term[0][16];
-    t->Phi[17] = t->Phi[17] + t->Phi[17] + w->term[0][17];
-    t->Phi[18] = t->Phi[18] + t->Phi[18] + w->term[0][18];
-    t->Phi[19] = t->Phi[19] + t->Phi[19] + w->term[0][19];
-    t->Phi[20] = t->Phi[20] + t->Phi[20] + w->term[0][20];
-    t->Phi[21] = t->Phi[21] + t->Phi[21] + w->term[0][21];
-    t->Phi[22] = t->Phi[22] + t->Phi[22] + w->term[0][22];
-    t->Phi[23] = t->Phi[23] + t->Phi[23] + w->term[0][23];
-    t->Phi[24] = t->Phi[24] + t->Phi[24] + w->term[0][24];
-    t->Phi[25] = t->Phi[25] + t->Phi[25] + w->term[0][25];
-    t->Phi[26] = t->Phi[26] + t->Phi[26] + w->term[0][26];
-    t->Phi[27] = t->Phi[27] + t->Phi[27] + w->term[0][27];
-    t->Phi[28] = t->Phi[28] + t->Phi[28] + w->term[0][28];
-    t->Phi[29] = t->Phi[29] + t->Phi[29] + w->term[0][29];
-    t->Phi[30] = t->Phi[30] + t->Phi[30] + w->term[0][30];
-    t->Phi[31] = t->Phi[31] + t->Phi[31] + w->term[0][31];
-    t->Phi[32] = t->Phi[32] + t->Phi[32] + w->term[0][32];
-    t->Phi[33] = t->Phi[33] + t->Phi[33] + w->term[0][33];
-    t->Phi[34] = t->Phi[34] + t->Phi[34] + w->term[0][34];
-    t->Phi[35] = t->Phi[35] + t->Phi[35] + w->term[0][35];
-    t->Phi[36] = t->Phi[36] + t->Phi[36] + w->term[0][36];
-    t->Phi[37] = t->Phi[37] + t->Phi[37] + w->term[0][37];
-    t->Phi[38] = t->Phi[38] + t->Phi[38] + w->term[0][38];
-    t->Phi[39] = t->Phi[39] + t->Phi[39] + w->term[0][39];
-    t->Phi[40] = t->Phi[40] + t->Phi[40] + w->term[0][40];
-    t->Phi[41] = t->Phi[41] + t->Phi[41] + w->term[0][41];
-    t->Phi[42] = t->Phi[42] + t->Phi[42] + w->term[0][42];
-    t->Phi[43] = t->Phi[43] + t->Phi[43] + w->term[0][43];
-    t->Phi[44] = t->Phi[44] + t->Phi[44] + w->term[0][44];
-    t->Phi[45] = t->Phi[45] + t->Phi[45] + w->term[0][45];
-    t->Phi[46] = t->Phi[46] + t->Phi[46] + w->term[0][46];
-    t->Phi[47] = t->Phi[47] + t->Phi[47] + w->term[0][47];
-    t->Phi[48] = t->Phi[48] + t->Phi[48] + w->term[0][48];
-    t->Phi[49] = t->Phi[49] + t->Phi[49] + w->term[0][49];
-    t->Phi[50] = t->Phi[50] + t->Phi[50] + w->term[0][50];
-    t->Phi[51] = t->Phi[51] + t->Phi[51] + w->term[0][51];
-    t->Phi[52] = t->Phi[52] + t->Phi[52] + w->term[0][52];
-    t->Phi[53] = t->Phi[53] + t->Phi[53] + w->term[0][53];
-    t->Phi[54] = t->Phi[54] + t->Phi[54] + w->term[0][54];
-    t->Phi[55] = t->Phi[55] + t->Phi[55] + w->term[0][55];
-    t->Phi[56] = t->Phi[56] + t->Phi[56] + w->term[0][56];
-    t->Phi[57] = t->Phi[57] + t->Phi[57] + w->term[0][57];
-    t->Phi[58] = t->Phi[58] + t->Phi[58] + w->term[0][58];
-    t->Phi[59] = t->Phi[59] + t->Phi[59] + w->term[0][59];
-    t->Phi[60] = t->Phi[60] + t->Phi[60] + w->term[0][60];
-    t->Phi[61] = t->Phi[61] + t->Phi[61] + w->term[0][61];
-    t->Phi[62] = t->Phi[62] + t->Phi[62] + w->term[0][62];
-    t->Phi[63] = t->Phi[63] + t->Phi[63] + w->term[0][63];
-    t->Phi[64] = t->Phi[64] + t->Phi[64] + w->term[0][64];
-    t->Phi[65] = t->Phi[65] + t->Phi[65] + w->term[0][65];
-    t->Phi[66] = t->Phi[66] + t->Phi[66] + w->term[0][66];
-    t->Phi[67] = t->Phi[67] + t->Phi[67] + w->term[0][67];
-    t->Phi[68] = t->Phi[68] + t->Phi[68] + w->term[0][68];
-    t->Phi[69] = t->Phi[69] + t->Phi[69] + w->term[0][69];
-    t->Phi[70] = t->Phi[70] + t->Phi[70] + w->term[0][70];
-    t->Phi[71] = t->Phi[71] + t->Phi[71] + w->term[0][71];
-    t->Phi[72] = t->Phi[72] + t->Phi[72] + w->term[0][72];
-    t->Phi[73] = t->Phi[73] + t->Phi[73] + w->term[0][73];
-    t->Phi[74] = t->Phi[74] + t->Phi[74] + w->term[0][74];
-    t->Phi[75] = t->Phi[75] + t->Phi[75] + w->term[0][75];
-    t->Phi[76] = t->Phi[76] + t->Phi[76] + w->term[0][76];
-    t->Phi[77] = t->Phi[77] + t->Phi[77] + w->term[0][77];
-    t->Phi[78] = t->Phi[78] + t->Phi[78] + w->term[0][78];
-    t->Phi[79] = t->Phi[79] + t->Phi[79] + w->term[0][79];
-    t->Phi[80] = t->Phi[80] + t->Phi[80] + w->term[0][80];
-    t->Phi[81] = t->Phi[81] + t->Phi[81] + w->term[0][81];
-    t->Phi[82] = t->Phi[82] + t->Phi[82] + w->term[0][82];
-    t->Phi[83] = t->Phi[83] + t->Phi[83] + w->term[0][83];
-    t->Phi[84] = t->Phi[84] + t->Phi[84] + w->term[0][84];
-    t->Phi[85] = t->Phi[85] + t->Phi[85] + w->term[0][85];
-    t->Phi[86] = t->Phi[86] + t->Phi[86] + w->term[0][86];
-    t->Phi[87] = t->Phi[87] + t->Phi[87] + w->term[0][87];
-    t->Phi[88] = t->Phi[88] + t->Phi[88] + w->term[0][88];
-    t->Phi[89] = t->Phi[89] + t->Phi[89] + w->term[0][89];
-    t->Phi[90] = t->Phi[90] + t->Phi[90] + w->term[0][90];
-    t->Phi[91] = t->Phi[91] + t->Phi[91] + w->term[0][91];
-    t->Phi[92] = t->Phi[92] + t->Phi[92] + w->term[0][92];
-    t->Phi[93] = t->Phi[93] + t->Phi[93] + w->term[0][93];
-    t->Phi[94] = t->Phi[94] + t->Phi[94] + w->term[0][94];
-    t->Phi[95] = t->Phi[95] + t->Phi[95] + w->term[0][95];
-    t->Phi[96] = t->Phi[96] + t->Phi[96] + w->term[0][96];
-    t->Phi[97] = t->Phi[97] + t->Phi[97] + w->term[0][97];
-    t->Phi[98] = t->Phi[98] + t->Phi[98] + w->term[0][98];
-    t->Phi[99] = t->Phi[99] + t->Phi[99] + w->term[0][99];
-    t->Phi[100] = t->Phi[100] + t->Phi[100] + w->term[0][100];
-    t->Phi[101] = t->Phi[101] + t->Phi[101] + w->term[0][101];
-    t->Phi[102] = t->Phi[102] + t->Phi[102] + w->term[0][102];
-    t->Phi[103] = t->Phi[103] + t->Phi[103] + w->term[0][103];
-    t->Phi[104] = t->Phi[104] + t->Phi[104] + w->term[0][104];
-    t->Phi[105] = t->Phi[105] + t->Phi[105] + w->term[0][105];
-    t->Phi[106] = t->Phi[106] + t->Phi[106] + w->term[0][106];
-    t->Phi[107] = t->Phi[107] + t->Phi[107] + w->term[0][107];
-    t->Phi[108] = t->Phi[108] + t->Phi[108] + w->term[0][108];
-    t->Phi[109] = t->Phi[109] + t->Phi[109] + w->term[0][109];
-    t->Phi[110] = t->Phi[110] + t->Phi[110] + w->term[0][110];
-    t->Phi[111] = t->Phi[111] + t->Phi[111] + w->term[0][111];
-    t->Phi[112] = t->Phi[112] + t->Phi[112] + w->term[0][112];
-    t->Phi[113] = t->Phi[113] + t->Phi[113] + w->term[0][113];
-    t->Phi[114] = t->Phi[114] + t->Phi[114] + w->term[0][114];
-    t->Phi[115] = t->Phi[115] + t->Phi[115] + w->term[0][115];
-    t->Phi[116] = t->Phi[116] + t->Phi[116] + w->term[0][116];
-    t->Phi[117] = t->Phi[117] + t->Phi[117] + w->term[0][117];
-    t->Phi[118] = t->Phi[118] + t->Phi[118] + w->term[0][118];
-    t->Phi[119] = t->Phi[119] + t->Phi[119] + w->term[0][119];
-    t->Phi[120] = t->Phi[120] + t->Phi[120] + w->term[0][120];
-    t->Phi[121] = t->Phi[121] + t->Phi[121] + w->term[0][121];
-    t->Phi[122] = t->Phi[122] + t->Phi[122] + w->term[0][122];
-    t->Phi[123] = t->Phi[123] + t->Phi[123] + w->term[0][123];
-    t->Phi[124] = t->Phi[124] + t->Phi[124] + w->term[0][124];
-    t->Phi[125] = t->Phi[125] + t->Phi[125] + w->term[0][125];
-    t->Phi[126] = t->Phi[126] + t->Phi[126] + w->term[0][126];
-    t->Phi[127] = t->Phi[127] + t->Phi[127] + w->term[0][127];
-    t->Phi[128] = t->Phi[128] + t->Phi[128] + w->term[0][128];
-    t->Phi[129] = t->Phi[129] + t->Phi[129] + w->term[0][129];
-    t->Phi[130] = t->Phi[130] + t->Phi[130] + w->term[0][130];
-    t->Phi[131] = t->Phi[131] + t->Phi[131] + w->term[0][131];
-    t->Phi[132] = t->Phi[132] + t->Phi[132] + w->term[0][132];
-    t->Phi[133] = t->Phi[133] + t->Phi[133] + w->term[0][133];
-    t->Phi[134] = t->Phi[134] + t->Phi[134] + w->term[0][134];
-    t->Phi[135] = t->Phi[135] + t->Phi[135] + w->term[0][135];
-    t->Phi[136] = t->Phi[136] + t->Phi[136] + w->term[0][136];
-    t->Phi[137] = t->Phi[137] + t->Phi[137] + w->term[0][137];
-    t->Phi[138] = t->Phi[138] + t->Phi[138] + w->term[0][138];
-    t->Phi[139] = t->Phi[139] + t->Phi[139] + w->term[0][139];
-    t->Phi[140] = t->Phi[140] + t->Phi[140] + w->term[0][140];
-    t->Phi[141] = t->Phi[141] + t->Phi[141] + w->term[0][141];
-    t->Phi[142] = t->Phi[142] + t->Phi[142] + w->term[0][142];
-    t->Phi[143] = t->Phi[143] + t->Phi[143] + w->term[0][143];
-    t->Phi[144] = t->Phi[144] + t->Phi[144] + w->term[0][144];
-    t->Phi[145] = t->Phi[145] + t->Phi[145] + w->term[0][145];
-    t->Phi[146] = t->Phi[146] + t->Phi[146] + w->term[0][146];
-    t->Phi[147] = t->Phi[147] + t->Phi[147] + w->term[0][147];
-    t->Phi[148] = t->Phi[148] + t->Phi[148] + w->term[0][148];
-    t->Phi[149] = t->Phi[149] + t->Phi[149] + w->term[0][149];
-    t->Phi[150] = t->Phi[150] + t->Phi[150] + w->term[0][150];
-    t->Phi[151] = t->Phi[151] + t->Phi[151] + w->term[0][151];
-    t->Phi[152] = t->Phi[152] + t->Phi[152] + w->term[0][152];
-    t->Phi[153] = t->Phi[153] + t->Phi[153] + w->term[0][153];
-    t->Phi[157] = t->Phi[157] + t->Phi[157] + w->term[0][154];
-    t->Phi[158] = t->Phi[158] + t->Phi[158] + w->term[0][155];
-    t->Phi[159] = t->Phi[159] + t->Phi[159] + w->term[0][156];
-    t->Phi[160] = t->Phi[160] + t->Phi[160] + w->term[0][157];
-    t->Phi[161] = t->Phi[161] + t->Phi[161] + w->term[0][158];
-    t->Phi[162] = t->Phi[162] + t->Phi[162] + w->term[0][159];
-    w->S[0] = w->S[0] + half*w->term[1][0];
-    w->S[1] = w->S[1] + half*w->term[1][1];
-    w->S[2] = w->S[2] + half*w->term[1][2];
-    w->S[3] = w->S[3] + half*w->term[1][3];
-    w->S[4] = w->S[4] + half*w->term[1][4];
-    w->S[5] = w->S[5] + half*w->term[1][5];
-    w->S[6] = w->S[6] + half*w->term[1][6];
-    w->S[7] = w->S[7] + half*w->term[1][7];
-    w->S[132] = w->S[132] + half*w->term[1][8];
-    w->S[133] = w->S[133] + half*w->term[1][9];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][148]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[148]),
+                lane_pair_load(&w->S[126]));
+        lane_pair_store(&w->term[1][148], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][150]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[150]),
+                lane_pair_load(&w->S[128]));
+        lane_pair_store(&w->term[1][150], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][152]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[152]),
+                lane_pair_load(&w->S[130]));
+        lane_pair_store(&w->term[1][152], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[0]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[0]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][0]));
+        lane_pair_store(&t->Phi[0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[2]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[2]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][2]));
+        lane_pair_store(&t->Phi[2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[4]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[4]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][4]));
+        lane_pair_store(&t->Phi[4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[6]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[6]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][6]));
+        lane_pair_store(&t->Phi[6], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[8]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[8]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][8]));
+        lane_pair_store(&t->Phi[8], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[10]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[10]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][10]));
+        lane_pair_store(&t->Phi[10], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[12]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[12]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][12]));
+        lane_pair_store(&t->Phi[12], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[14]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[14]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][14]));
+        lane_pair_store(&t->Phi[14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[16]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[16]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][16]));
+        lane_pair_store(&t->Phi[16], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[18]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[18]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][18]));
+        lane_pair_store(&t->Phi[18], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[20]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[20]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][20]));
+        lane_pair_store(&t->Phi[20], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[22]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[22]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][22]));
+        lane_pair_store(&t->Phi[22], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[24]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[24]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][24]));
+        lane_pair_store(&t->Phi[24], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[26]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[26]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][26]));
+        lane_pair_store(&t->Phi[26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[28]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[28]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][28]));
+        lane_pair_store(&t->Phi[28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[30]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[30]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][30]));
+        lane_pair_store(&t->Phi[30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[32]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[32]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][32]));
+        lane_pair_store(&t->Phi[32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[34]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[34]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][34]));
+        lane_pair_store(&t->Phi[34], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[36]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[36]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][36]));
+        lane_pair_store(&t->Phi[36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[38]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[38]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][38]));
+        lane_pair_store(&t->Phi[38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[40]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[40]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][40]));
+        lane_pair_store(&t->Phi[40], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[42]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[42]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][42]));
+        lane_pair_store(&t->Phi[42], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[44]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[44]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][44]));
+        lane_pair_store(&t->Phi[44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[46]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[46]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][46]));
+        lane_pair_store(&t->Phi[46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[48]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[48]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][48]));
+        lane_pair_store(&t->Phi[48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[50]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[50]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][50]));
+        lane_pair_store(&t->Phi[50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[52]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[52]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][52]));
+        lane_pair_store(&t->Phi[52], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[54]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[54]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][54]));
+        lane_pair_store(&t->Phi[54], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[56]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[56]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][56]));
+        lane_pair_store(&t->Phi[56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[58]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[58]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][58]));
+        lane_pair_store(&t->Phi[58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[60]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[60]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][60]));
+        lane_pair_store(&t->Phi[60], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[62]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[62]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][62]));
+        lane_pair_store(&t->Phi[62], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[64]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[64]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][64]));
+        lane_pair_store(&t->Phi[64], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[66]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[66]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][66]));
+        lane_pair_store(&t->Phi[66], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[68]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[68]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][68]));
+        lane_pair_store(&t->Phi[68], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[70]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[70]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][70]));
+        lane_pair_store(&t->Phi[70], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[72]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[72]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][72]));
+        lane_pair_store(&t->Phi[72], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[74]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[74]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][74]));
+        lane_pair_store(&t->Phi[74], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[76]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[76]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][76]));
+        lane_pair_store(&t->Phi[76], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[78]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[78]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][78]));
+        lane_pair_store(&t->Phi[78], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[80]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[80]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][80]));
+        lane_pair_store(&t->Phi[80], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[82]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[82]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][82]));
+        lane_pair_store(&t->Phi[82], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[84]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[84]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][84]));
+        lane_pair_store(&t->Phi[84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[86]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[86]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][86]));
+        lane_pair_store(&t->Phi[86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[88]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[88]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][88]));
+        lane_pair_store(&t->Phi[88], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[90]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[90]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][90]));
+        lane_pair_store(&t->Phi[90], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[92]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[92]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][92]));
+        lane_pair_store(&t->Phi[92], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[94]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[94]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][94]));
+        lane_pair_store(&t->Phi[94], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[96]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[96]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][96]));
+        lane_pair_store(&t->Phi[96], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[98]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[98]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][98]));
+        lane_pair_store(&t->Phi[98], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[100]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[100]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][100]));
+        lane_pair_store(&t->Phi[100], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[102]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[102]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][102]));
+        lane_pair_store(&t->Phi[102], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[104]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[104]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][104]));
+        lane_pair_store(&t->Phi[104], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[106]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[106]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][106]));
+        lane_pair_store(&t->Phi[106], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[108]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[108]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][108]));
+        lane_pair_store(&t->Phi[108], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[110]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[110]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][110]));
+        lane_pair_store(&t->Phi[110], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[112]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[112]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][112]));
+        lane_pair_store(&t->Phi[112], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[114]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[114]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][114]));
+        lane_pair_store(&t->Phi[114], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[116]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[116]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][116]));
+        lane_pair_store(&t->Phi[116], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[118]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[118]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][118]));
+        lane_pair_store(&t->Phi[118], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[120]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[120]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][120]));
+        lane_pair_store(&t->Phi[120], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[122]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[122]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][122]));
+        lane_pair_store(&t->Phi[122], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[124]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[124]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][124]));
+        lane_pair_store(&t->Phi[124], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[126]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[126]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][126]));
+        lane_pair_store(&t->Phi[126], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[128]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[128]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][128]));
+        lane_pair_store(&t->Phi[128], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[130]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[130]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][130]));
+        lane_pair_store(&t->Phi[130], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[132]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[132]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][132]));
+        lane_pair_store(&t->Phi[132], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[134]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[134]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][134]));
+        lane_pair_store(&t->Phi[134], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[136]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[136]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][136]));
+        lane_pair_store(&t->Phi[136], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[138]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[138]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][138]));
+        lane_pair_store(&t->Phi[138], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[140]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[140]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][140]));
+        lane_pair_store(&t->Phi[140], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[142]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[142]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][142]));
+        lane_pair_store(&t->Phi[142], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[144]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[144]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][144]));
+        lane_pair_store(&t->Phi[144], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[146]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[146]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][146]));
+        lane_pair_store(&t->Phi[146], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[148]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[148]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][148]));
+        lane_pair_store(&t->Phi[148], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[150]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[150]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][150]));
+        lane_pair_store(&t->Phi[150], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[152]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[152]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][152]));
+        lane_pair_store(&t->Phi[152], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[157]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[157]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][154]));
+        lane_pair_store(&t->Phi[157], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[159]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[159]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][156]));
+        lane_pair_store(&t->Phi[159], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[161]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[161]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][158]));
+        lane_pair_store(&t->Phi[161], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[0]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][0]));
+        lane_pair_store(&w->S[0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[2]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][2]));
+        lane_pair_store(&w->S[2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[4]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][4]));
+        lane_pair_store(&w->S[4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[6]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][6]));
+        lane_pair_store(&w->S[6], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[132]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][8]));
+        lane_pair_store(&w->S[132], pair);
+    }
     w->S[134] = w->S[134] + half*w->term[1][10];
-    w->S[8] = w->S[8] + half*w->term[1][11];
-    w->S[9] = w->S[9] + half*w->term[1][12];
-    w->S[10] = w->S[10] + half*w->term[1][13];
-    w->S[11] = w->S[11] + half*w->term[1][14];
-    w->S[12] = w->S[12] + half*w->term[1][15];
-    w->S[13] = w->S[13] + half*w->term[1][16];
-    w->S[14] = w->S[14] + half*w->term[1][17];
-    w->S[15] = w->S[15] + half*w->term[1][18];
-    w->S[16] = w->S[16] + half*w->term[1][19];
-    w->S[17] = w->S[17] + half*w->term[1][20];
-    w->S[18] = w->S[18] + half*w->term[1][21];
-    w->S[19] = w->S[19] + half*w->term[1][22];
-    w->S[20] = w->S[20] + half*w->term[1][23];
-    w->S[21] = w->S[21] + half*w->term[1][24];
-    w->S[135] = w->S[135] + half*w->term[1][25];
-    w->S[136] = w->S[136] + half*w->term[1][26];
+    {
+        lane_pair pair = lane_pair_load(&w->S[8]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][11]));
+        lane_pair_store(&w->S[8], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[10]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][13]));
+        lane_pair_store(&w->S[10], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[12]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][15]));
+        lane_pair_store(&w->S[12], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[14]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][17]));
+        lane_pair_store(&w->S[14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[16]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][19]));
+        lane_pair_store(&w->S[16], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[18]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][21]));
+        lane_pair_store(&w->S[18], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[20]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][23]));
+        lane_pair_store(&w->S[20], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[135]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][25]));
+        lane_pair_store(&w->S[135], pair);
+    }
     w->S[137] = w->S[137] + half*w->term[1][27];
-    w->S[22] = w->S[22] + half*w->term[1][28];
-    w->S[23] = w->S[23] + half*w->term[1][29];
-    w->S[24] = w->S[24] + half*w->term[1][30];
-    w->S[25] = w->S[25] + half*w->term[1][31];
-    w->S[26] = w->S[26] + half*w->term[1][32];
-    w->S[27] = w->S[27] + half*w->term[1][33];
-    w->S[28] = w->S[28] + half*w->term[1][34];
-    w->S[29] = w->S[29] + half*w->term[1][35];
-    w->S[30] = w->S[30] + half*w->term[1][36];
-    w->S[31] = w->S[31] + half*w->term[1][37];
-    w->S[32] = w->S[32] + half*w->term[1][38];
-    w->S[33] = w->S[33] + half*w->term[1][39];
-    w->S[34] = w->S[34] + half*w->term[1][40];
-    w->S[35] = w->S[35] + half*w->term[1][41];
-    w->S[138] = w->S[138] + half*w->term[1][42];
-    w->S[139] = w->S[139] + half*w->term[1][43];
+    {
+        lane_pair pair = lane_pair_load(&w->S[22]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][28]));
+        lane_pair_store(&w->S[22], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[24]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][30]));
+        lane_pair_store(&w->S[24], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[26]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][32]));
+        lane_pair_store(&w->S[26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[28]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][34]));
+        lane_pair_store(&w->S[28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[30]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][36]));
+        lane_pair_store(&w->S[30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[32]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][38]));
+        lane_pair_store(&w->S[32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[34]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][40]));
+        lane_pair_store(&w->S[34], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[138]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][42]));
+        lane_pair_store(&w->S[138], pair);
+    }
     w->S[140] = w->S[140] + half*w->term[1][44];
-    w->S[36] = w->S[36] + half*w->term[1][45];
-    w->S[37] = w->S[37] + half*w->term[1][46];
-    w->S[38] = w->S[38] + half*w->term[1][47];
-    w->S[39] = w->S[39] + half*w->term[1][48];
-    w->S[40] = w->S[40] + half*w->term[1][49];
-    w->S[41] = w->S[41] + half*w->term[1][50];
-    w->S[42] = w->S[42] + half*w->term[1][51];
-    w->S[43] = w->S[43] + half*w->term[1][52];
-    w->S[44] = w->S[44] + half*w->term[1][53];
-    w->S[45] = w->S[45] + half*w->term[1][54];
-    w->S[46] = w->S[46] + half*w->term[1][55];
-    w->S[47] = w->S[47] + half*w->term[1][56];
-    w->S[48] = w->S[48] + half*w->term[1][57];
-    w->S[49] = w->S[49] + half*w->term[1][58];
-    w->S[141] = w->S[141] + half*w->term[1][59];
-    w->S[142] = w->S[142] + half*w->term[1][60];
+    {
+        lane_pair pair = lane_pair_load(&w->S[36]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][45]));
+        lane_pair_store(&w->S[36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[38]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][47]));
+        lane_pair_store(&w->S[38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[40]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][49]));
+        lane_pair_store(&w->S[40], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[42]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][51]));
+        lane_pair_store(&w->S[42], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[44]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][53]));
+        lane_pair_store(&w->S[44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[46]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][55]));
+        lane_pair_store(&w->S[46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[48]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][57]));
+        lane_pair_store(&w->S[48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[141]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][59]));
+        lane_pair_store(&w->S[141], pair);
+    }
     w->S[143] = w->S[143] + half*w->term[1][61];
-    w->S[50] = w->S[50] + half*w->term[1][62];
-    w->S[51] = w->S[51] + half*w->term[1][63];
-    w->S[52] = w->S[52] + half*w->term[1][64];
-    w->S[53] = w->S[53] + half*w->term[1][65];
-    w->S[54] = w->S[54] + half*w->term[1][66];
-    w->S[55] = w->S[55] + half*w->term[1][67];
-    w->S[56] = w->S[56] + half*w->term[1][68];
-    w->S[57] = w->S[57] + half*w->term[1][69];
-    w->S[58] = w->S[58] + half*w->term[1][70];
-    w->S[59] = w->S[59] + half*w->term[1][71];
-    w->S[60] = w->S[60] + half*w->term[1][72];
-    w->S[61] = w->S[61] + half*w->term[1][73];
-    w->S[62] = w->S[62] + half*w->term[1][74];
-    w->S[63] = w->S[63] + half*w->term[1][75];
-    w->S[144] = w->S[144] + half*w->term[1][76];
-    w->S[145] = w->S[145] + half*w->term[1][77];
+    {
+        lane_pair pair = lane_pair_load(&w->S[50]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][62]));
+        lane_pair_store(&w->S[50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[52]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][64]));
+        lane_pair_store(&w->S[52], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[54]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][66]));
+        lane_pair_store(&w->S[54], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[56]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][68]));
+        lane_pair_store(&w->S[56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[58]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][70]));
+        lane_pair_store(&w->S[58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[60]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][72]));
+        lane_pair_store(&w->S[60], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[62]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][74]));
+        lane_pair_store(&w->S[62], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[144]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][76]));
+        lane_pair_store(&w->S[144], pair);
+    }
     w->S[146] = w->S[146] + half*w->term[1][78];
-    w->S[64] = w->S[64] + half*w->term[1][79];
-    w->S[65] = w->S[65] + half*w->term[1][80];
-    w->S[66] = w->S[66] + half*w->term[1][81];
-    w->S[67] = w->S[67] + half*w->term[1][82];
-    w->S[68] = w->S[68] + half*w->term[1][83];
-    w->S[69] = w->S[69] + half*w->term[1][84];
-    w->S[70] = w->S[70] + half*w->term[1][85];
-    w->S[71] = w->S[71] + half*w->term[1][86];
-    w->S[72] = w->S[72] + half*w->term[1][87];
-    w->S[73] = w->S[73] + half*w->term[1][88];
-    w->S[74] = w->S[74] + half*w->term[1][89];
-    w->S[75] = w->S[75] + half*w->term[1][90];
-    w->S[76] = w->S[76] + half*w->term[1][91];
-    w->S[77] = w->S[77] + half*w->term[1][92];
-    w->S[147] = w->S[147] + half*w->term[1][93];
-    w->S[148] = w->S[148] + half*w->term[1][94];
+    {
+        lane_pair pair = lane_pair_load(&w->S[64]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][79]));
+        lane_pair_store(&w->S[64], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[66]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][81]));
+        lane_pair_store(&w->S[66], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[68]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][83]));
+        lane_pair_store(&w->S[68], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[70]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][85]));
+        lane_pair_store(&w->S[70], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[72]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][87]));
+        lane_pair_store(&w->S[72], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[74]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][89]));
+        lane_pair_store(&w->S[74], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[76]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][91]));
+        lane_pair_store(&w->S[76], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[147]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][93]));
+        lane_pair_store(&w->S[147], pair);
+    }
     w->S[149] = w->S[149] + half*w->term[1][95];
-    w->S[78] = w->S[78] + half*w->term[1][96];
-    w->S[79] = w->S[79] + half*w->term[1][97];
-    w->S[80] = w->S[80] + half*w->term[1][98];
-    w->S[81] = w->S[81] + half*w->term[1][99];
-    w->S[82] = w->S[82] + half*w->term[1][100];
-    w->S[83] = w->S[83] + half*w->term[1][101];
-    w->S[84] = w->S[84] + half*w->term[1][102];
-    w->S[85] = w->S[85] + half*w->term[1][103];
-    w->S[86] = w->S[86] + half*w->term[1][104];
-    w->S[87] = w->S[87] + half*w->term[1][105];
-    w->S[88] = w->S[88] + half*w->term[1][106];
-    w->S[89] = w->S[89] + half*w->term[1][107];
-    w->S[90] = w->S[90] + half*w->term[1][108];
-    w->S[91] = w->S[91] + half*w->term[1][109];
-    w->S[150] = w->S[150] + half*w->term[1][110];
-    w->S[151] = w->S[151] + half*w->term[1][111];
+    {
+        lane_pair pair = lane_pair_load(&w->S[78]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][96]));
+        lane_pair_store(&w->S[78], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[80]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][98]));
+        lane_pair_store(&w->S[80], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[82]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][100]));
+        lane_pair_store(&w->S[82], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[84]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][102]));
+        lane_pair_store(&w->S[84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[86]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][104]));
+        lane_pair_store(&w->S[86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[88]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][106]));
+        lane_pair_store(&w->S[88], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[90]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][108]));
+        lane_pair_store(&w->S[90], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[150]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][110]));
+        lane_pair_store(&w->S[150], pair);
+    }
     w->S[152] = w->S[152] + half*w->term[1][112];
-    w->S[92] = w->S[92] + half*w->term[1][113];
-    w->S[93] = w->S[93] + half*w->term[1][114];
-    w->S[94] = w->S[94] + half*w->term[1][115];
-    w->S[95] = w->S[95] + half*w->term[1][116];
-    w->S[96] = w->S[96] + half*w->term[1][117];
-    w->S[97] = w->S[97] + half*w->term[1][118];
-    w->S[98] = w->S[98] + half*w->term[1][119];
-    w->S[99] = w->S[99] + half*w->term[1][120];
-    w->S[100] = w->S[100] + half*w->term[1][121];
-    w->S[101] = w->S[101] + half*w->term[1][122];
-    w->S[102] = w->S[102] + half*w->term[1][123];
-    w->S[103] = w->S[103] + half*w->term[1][124];
+    {
+        lane_pair pair = lane_pair_load(&w->S[92]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][113]));
+        lane_pair_store(&w->S[92], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[94]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][115]));
+        lane_pair_store(&w->S[94], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[96]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][117]));
+        lane_pair_store(&w->S[96], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[98]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][119]));
+        lane_pair_store(&w->S[98], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[100]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][121]));
+        lane_pair_store(&w->S[100], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[102]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][123]));
+        lane_pair_store(&w->S[102], pair);
+    }
     w->S[104] = w->S[104] + half*w->term[1][125];
     w->S[153] = w->S[153] + half*w->term[1][126];
     w->S[105] = w->S[105] + half*w->term[1][127];
-    w->S[154] = w->S[154] + half*w->term[1][128];
-    w->S[155] = w->S[155] + half*w->term[1][129];
+    {
+        lane_pair pair = lane_pair_load(&w->S[154]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][128]));
+        lane_pair_store(&w->S[154], pair);
+    }
     w->S[156] = w->S[156] + half*w->term[1][130];
-    w->S[106] = w->S[106] + half*w->term[1][131];
-    w->S[107] = w->S[107] + half*w->term[1][132];
-    w->S[108] = w->S[108] + half*w->term[1][133];
-    w->S[109] = w->S[109] + half*w->term[1][134];
-    w->S[110] = w->S[110] + half*w->term[1][135];
-    w->S[111] = w->S[111] + half*w->term[1][136];
-    w->S[112] = w->S[112] + half*w->term[1][137];
-    w->S[113] = w->S[113] + half*w->term[1][138];
-    w->S[114] = w->S[114] + half*w->term[1][139];
-    w->S[115] = w->S[115] + half*w->term[1][140];
-    w->S[116] = w->S[116] + half*w->term[1][141];
-    w->S[117] = w->S[117] + half*w->term[1][142];
-    w->S[118] = w->S[118] + half*w->term[1][143];
-    w->S[119] = w->S[119] + half*w->term[1][144];
-    w->S[157] = w->S[157] + half*w->term[1][145];
-    w->S[158] = w->S[158] + half*w->term[1][146];
+    {
+        lane_pair pair = lane_pair_load(&w->S[106]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][131]));
+        lane_pair_store(&w->S[106], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[108]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][133]));
+        lane_pair_store(&w->S[108], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[110]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][135]));
+        lane_pair_store(&w->S[110], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[112]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][137]));
+        lane_pair_store(&w->S[112], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[114]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][139]));
+        lane_pair_store(&w->S[114], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[116]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][141]));
+        lane_pair_store(&w->S[116], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[118]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][143]));
+        lane_pair_store(&w->S[118], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[157]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][145]));
+        lane_pair_store(&w->S[157], pair);
+    }
     w->S[159] = w->S[159] + half*w->term[1][147];
-    w->S[120] = w->S[120] + half*w->term[1][148];
-    w->S[121] = w->S[121] + half*w->term[1][149];
-    w->S[122] = w->S[122] + half*w->term[1][150];
-    w->S[123] = w->S[123] + half*w->term[1][151];
-    w->S[124] = w->S[124] + half*w->term[1][152];
-    w->S[125] = w->S[125] + half*w->term[1][153];
-    w->S[126] = w->S[126] + half*w->term[1][154];
-    w->S[127] = w->S[127] + half*w->term[1][155];
-    w->S[128] = w->S[128] + half*w->term[1][156];
-    w->S[129] = w->S[129] + half*w->term[1][157];
-    w->S[130] = w->S[130] + half*w->term[1][158];
-    w->S[131] = w->S[131] + half*w->term[1][159];
+    {
+        lane_pair pair = lane_pair_load(&w->S[120]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][148]));
+        lane_pair_store(&w->S[120], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[122]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][150]));
+        lane_pair_store(&w->S[122], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[124]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][152]));
+        lane_pair_store(&w->S[124], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[126]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][154]));
+        lane_pair_store(&w->S[126], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[128]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][156]));
+        lane_pair_store(&w->S[128], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[130]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][158]));
+        lane_pair_store(&w->S[130], pair);
+    }
 }
 
 ENU_DOPPLER18_BLOCK enu_doppler18_scalar transition_check(enu_doppler18_transition *restrict t,
@@ -2652,12 +4286,21 @@ ENU_DOPPLER18_BLOCK enu_doppler18_scalar transition_check(enu_doppler18_transiti
     t->Phi[108] = t->Phi[108] + one;
     t->Phi[126] = t->Phi[126] + one;
     t->Phi[144] = t->Phi[144] + one;
-    t->Phi[157] = t->Phi[157] + one;
-    t->Phi[158] = t->Phi[158] + one;
-    t->Phi[159] = t->Phi[159] + one;
-    t->Phi[160] = t->Phi[160] + one;
-    t->Phi[161] = t->Phi[161] + one;
-    t->Phi[162] = t->Phi[162] + one;
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[157]);
+        pair = lane_pair_add(pair, lane_pair_of(one, one));
+        lane_pair_store(&t->Phi[157], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[159]);
+        pair = lane_pair_add(pair, lane_pair_of(one, one));
+        lane_pair_store(&t->Phi[159], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[161]);
+        pair = lane_pair_add(pair, lane_pair_of(one, one));
+        lane_pair_store(&t->Phi[161], pair);
+    }
     v = t->Phi[0] + t->Phi[1] + t->Phi[2] + t->Phi[3] + t->Phi[4] + t->Phi[5] + t->Phi[6] +
             t->Phi[7] + t->Phi[8] + t->Phi[9] + t->Phi[10] + t->Phi[11] + t->Phi[12] + t->Phi[13] +
             t->Phi[14] + t->Phi[15] + t->Phi[16] + t->Phi[17] + t->Phi[18] + t->Phi[19] + t->Phi[20]
@@ -2700,12 +4343,18 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
         lane_pair_store(&w->term[0][0], pair);
     }
     w->term[0][2] = w->S[0]*m->G[2] + w->S[1]*m->G[5] + w->S[2]*m->G[8];
-    w->term[0][3] = w->S[8]*m->G[9];
-    w->term[0][4] = w->S[9]*m->G[10];
-    w->term[0][5] = w->S[10]*m->G[11];
-    w->term[0][6] = w->S[11]*m->G[12];
-    w->term[0][7] = w->S[12]*m->G[13];
-    w->term[0][8] = w->S[13]*m->G[14];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[8]), lane_pair_load(&m->G[9]));
+        lane_pair_store(&w->term[0][3], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[10]), lane_pair_load(&m->G[11]));
+        lane_pair_store(&w->term[0][5], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[12]), lane_pair_load(&m->G[13]));
+        lane_pair_store(&w->term[0][7], pair);
+    }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[14], w->S[14]),
                 lane_pair_load(&m->G[0]));
@@ -2716,12 +4365,18 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
         lane_pair_store(&w->term[0][9], pair);
     }
     w->term[0][11] = w->S[14]*m->G[2] + w->S[15]*m->G[5] + w->S[16]*m->G[8];
-    w->term[0][12] = w->S[22]*m->G[9];
-    w->term[0][13] = w->S[23]*m->G[10];
-    w->term[0][14] = w->S[24]*m->G[11];
-    w->term[0][15] = w->S[25]*m->G[12];
-    w->term[0][16] = w->S[26]*m->G[13];
-    w->term[0][17] = w->S[27]*m->G[14];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[22]), lane_pair_load(&m->G[9]));
+        lane_pair_store(&w->term[0][12], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[24]), lane_pair_load(&m->G[11]));
+        lane_pair_store(&w->term[0][14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[26]), lane_pair_load(&m->G[13]));
+        lane_pair_store(&w->term[0][16], pair);
+    }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[28], w->S[28]),
                 lane_pair_load(&m->G[0]));
@@ -2732,12 +4387,18 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
         lane_pair_store(&w->term[0][18], pair);
     }
     w->term[0][20] = w->S[28]*m->G[2] + w->S[29]*m->G[5] + w->S[30]*m->G[8];
-    w->term[0][21] = w->S[36]*m->G[9];
-    w->term[0][22] = w->S[37]*m->G[10];
-    w->term[0][23] = w->S[38]*m->G[11];
-    w->term[0][24] = w->S[39]*m->G[12];
-    w->term[0][25] = w->S[40]*m->G[13];
-    w->term[0][26] = w->S[41]*m->G[14];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[36]), lane_pair_load(&m->G[9]));
+        lane_pair_store(&w->term[0][21], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[38]), lane_pair_load(&m->G[11]));
+        lane_pair_store(&w->term[0][23], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[40]), lane_pair_load(&m->G[13]));
+        lane_pair_store(&w->term[0][25], pair);
+    }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[42], w->S[42]),
                 lane_pair_load(&m->G[0]));
@@ -2748,12 +4409,18 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
         lane_pair_store(&w->term[0][27], pair);
     }
     w->term[0][29] = w->S[42]*m->G[2] + w->S[43]*m->G[5] + w->S[44]*m->G[8];
-    w->term[0][30] = w->S[50]*m->G[9];
-    w->term[0][31] = w->S[51]*m->G[10];
-    w->term[0][32] = w->S[52]*m->G[11];
-    w->term[0][33] = w->S[53]*m->G[12];
-    w->term[0][34] = w->S[54]*m->G[13];
-    w->term[0][35] = w->S[55]*m->G[14];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[50]), lane_pair_load(&m->G[9]));
+        lane_pair_store(&w->term[0][30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[52]), lane_pair_load(&m->G[11]));
+        lane_pair_store(&w->term[0][32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[54]), lane_pair_load(&m->G[13]));
+        lane_pair_store(&w->term[0][34], pair);
+    }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[56], w->S[56]),
                 lane_pair_load(&m->G[0]));
@@ -2764,12 +4431,18 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
         lane_pair_store(&w->term[0][36], pair);
     }
     w->term[0][38] = w->S[56]*m->G[2] + w->S[57]*m->G[5] + w->S[58]*m->G[8];
-    w->term[0][39] = w->S[64]*m->G[9];
-    w->term[0][40] = w->S[65]*m->G[10];
-    w->term[0][41] = w->S[66]*m->G[11];
-    w->term[0][42] = w->S[67]*m->G[12];
-    w->term[0][43] = w->S[68]*m->G[13];
-    w->term[0][44] = w->S[69]*m->G[14];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[64]), lane_pair_load(&m->G[9]));
+        lane_pair_store(&w->term[0][39], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[66]), lane_pair_load(&m->G[11]));
+        lane_pair_store(&w->term[0][41], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[68]), lane_pair_load(&m->G[13]));
+        lane_pair_store(&w->term[0][43], pair);
+    }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[70], w->S[70]),
                 lane_pair_load(&m->G[0]));
@@ -2780,12 +4453,18 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
         lane_pair_store(&w->term[0][45], pair);
     }
     w->term[0][47] = w->S[70]*m->G[2] + w->S[71]*m->G[5] + w->S[72]*m->G[8];
-    w->term[0][48] = w->S[78]*m->G[9];
-    w->term[0][49] = w->S[79]*m->G[10];
-    w->term[0][50] = w->S[80]*m->G[11];
-    w->term[0][51] = w->S[81]*m->G[12];
-    w->term[0][52] = w->S[82]*m->G[13];
-    w->term[0][53] = w->S[83]*m->G[14];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[78]), lane_pair_load(&m->G[9]));
+        lane_pair_store(&w->term[0][48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[80]), lane_pair_load(&m->G[11]));
+        lane_pair_store(&w->term[0][50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[82]), lane_pair_load(&m->G[13]));
+        lane_pair_store(&w->term[0][52], pair);
+    }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[84], w->S[84]),
                 lane_pair_load(&m->G[0]));
@@ -2796,12 +4475,18 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
         lane_pair_store(&w->term[0][54], pair);
     }
     w->term[0][56] = w->S[84]*m->G[2] + w->S[85]*m->G[5] + w->S[86]*m->G[8];
-    w->term[0][57] = w->S[92]*m->G[9];
-    w->term[0][58] = w->S[93]*m->G[10];
-    w->term[0][59] = w->S[94]*m->G[11];
-    w->term[0][60] = w->S[95]*m->G[12];
-    w->term[0][61] = w->S[96]*m->G[13];
-    w->term[0][62] = w->S[97]*m->G[14];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[92]), lane_pair_load(&m->G[9]));
+        lane_pair_store(&w->term[0][57], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[94]), lane_pair_load(&m->G[11]));
+        lane_pair_store(&w->term[0][59], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[96]), lane_pair_load(&m->G[13]));
+        lane_pair_store(&w->term[0][61], pair);
+    }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[98], w->S[98]),
                 lane_pair_load(&m->G[0]));
@@ -2812,12 +4497,18 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
         lane_pair_store(&w->term[0][63], pair);
     }
     w->term[0][65] = w->S[98]*m->G[2] + w->S[99]*m->G[5] + w->S[100]*m->G[8];
-    w->term[0][66] = w->S[106]*m->G[9];
-    w->term[0][67] = w->S[107]*m->G[10];
-    w->term[0][68] = w->S[108]*m->G[11];
-    w->term[0][69] = w->S[109]*m->G[12];
-    w->term[0][70] = w->S[110]*m->G[13];
-    w->term[0][71] = w->S[111]*m->G[14];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[106]), lane_pair_load(&m->G[9]));
+        lane_pair_store(&w->term[0][66], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[108]), lane_pair_load(&m->G[11]));
+        lane_pair_store(&w->term[0][68], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[110]), lane_pair_load(&m->G[13]));
+        lane_pair_store(&w->term[0][70], pair);
+    }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[112], w->S[112]),
                 lane_pair_load(&m->G[0]));
@@ -2828,18 +4519,30 @@ ENU_DOPPLER18_BLOCK void noise_input(const enu_doppler18_matrices *restrict m,
         lane_pair_store(&w->term[0][72], pair);
     }
     w->term[0][74] = w->S[112]*m->G[2] + w->S[113]*m->G[5] + w->S[114]*m->G[8];
-    w->term[0][75] = w->S[120]*m->G[9];
-    w->term[0][76] = w->S[121]*m->G[10];
-    w->term[0][77] = w->S[122]*m->G[11];
-    w->term[0][78] = w->S[123]*m->G[12];
-    w->term[0][79] = w->S[124]*m->G[13];
-    w->term[0][80] = w->S[125]*m->G[14];
-    w->term[0][81] = w->S[126]*m->G[9];
-    w->term[0][82] = w->S[127]*m->G[10];
-    w->term[0][83] = w->S[128]*m->G[11];
-    w->term[0][84] = w->S[129]*m->G[12];
-    w->term[0][85] = w->S[130]*m->G[13];
-    w->term[0][86] = w->S[131]*m->G[14];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[120]), lane_pair_load(&m->G[9]));
+        lane_pair_store(&w->term[0][75], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[122]), lane_pair_load(&m->G[11]));
+        lane_pair_store(&w->term[0][77], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[124]), lane_pair_load(&m->G[13]));
+        lane_pair_store(&w->term[0][79], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[126]), lane_pair_load(&m->G[9]));
+        lane_pair_store(&w->term[0][81], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[128]), lane_pair_load(&m->G[11]));
+        lane_pair_store(&w->term[0][83], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[130]), lane_pair_load(&m->G[13]));
+        lane_pair_store(&w->term[0][85], pair);
+    }
 }
 
 ENU_DOPPLER18_BLOCK void process_noise(const enu_doppler18_matrices *restrict m,
@@ -2950,71 +4653,44 @@ ENU_DOPPLER18_BLOCK void process_noise(const enu_doppler18_matrices *restrict m,
     w->term[1][84] = w->term[0][84]*w->term[1][93];
     w->term[1][85] = w->term[0][85]*w->term[1][94];
     w->term[1][86] = w->term[0][86]*w->term[1][95];
-    t->Qd[9] = 0;
-    t->Qd[10] = 0;
+    lane_pair_store(&t->Qd[9], lane_pair_of(0, 0));
     t->Qd[11] = 0;
-    t->Qd[26] = 0;
-    t->Qd[27] = 0;
+    lane_pair_store(&t->Qd[26], lane_pair_of(0, 0));
     t->Qd[28] = 0;
-    t->Qd[42] = 0;
-    t->Qd[43] = 0;
+    lane_pair_store(&t->Qd[42], lane_pair_of(0, 0));
     t->Qd[44] = 0;
-    t->Qd[57] = 0;
-    t->Qd[58] = 0;
+    lane_pair_store(&t->Qd[57], lane_pair_of(0, 0));
     t->Qd[59] = 0;
-    t->Qd[71] = 0;
-    t->Qd[72] = 0;
+    lane_pair_store(&t->Qd[71], lane_pair_of(0, 0));
     t->Qd[73] = 0;
-    t->Qd[84] = 0;
-    t->Qd[85] = 0;
+    lane_pair_store(&t->Qd[84], lane_pair_of(0, 0));
     t->Qd[86] = 0;
-    t->Qd[96] = 0;
-    t->Qd[97] = 0;
+    lane_pair_store(&t->Qd[96], lane_pair_of(0, 0));
     t->Qd[98] = 0;
-    t->Qd[107] = 0;
-    t->Qd[108] = 0;
+    lane_pair_store(&t->Qd[107], lane_pair_of(0, 0));
     t->Qd[109] = 0;
-    t->Qd[117] = 0;
-    t->Qd[118] = 0;
+    lane_pair_store(&t->Qd[117], lane_pair_of(0, 0));
     t->Qd[119] = 0;
-    t->Qd[126] = 0;
-    t->Qd[127] = 0;
-    t->Qd[128] = 0;
-    t->Qd[129] = 0;
-    t->Qd[130] = 0;
-    t->Qd[131] = 0;
-    t->Qd[132] = 0;
-    t->Qd[133] = 0;
-    t->Qd[134] = 0;
-    t->Qd[135] = 0;
-    t->Qd[136] = 0;
-    t->Qd[137] = 0;
-    t->Qd[138] = 0;
-    t->Qd[139] = 0;
-    t->Qd[140] = 0;
-    t->Qd[141] = 0;
-    t->Qd[142] = 0;
-    t->Qd[143] = 0;
-    t->Qd[144] = 0;
-    t->Qd[145] = 0;
-    t->Qd[146] = 0;
-    t->Qd[147] = 0;
-    t->Qd[148] = 0;
-    t->Qd[149] = 0;
-    t->Qd[151] = 0;
-    t->Qd[152] = 0;
-    t->Qd[153] = 0;
-    t->Qd[154] = 0;
+    lane_pair_store(&t->Qd[126], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[128], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[130], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[132], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[134], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[136], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[138], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[140], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[142], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[144], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[146], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[148], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[151], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[153], lane_pair_of(0, 0));
     t->Qd[155] = 0;
-    t->Qd[157] = 0;
-    t->Qd[158] = 0;
-    t->Qd[159] = 0;
-    t->Qd[160] = 0;
-    t->Qd[162] = 0;
-    t->Qd[163] = 0;
+    lane_pair_store(&t->Qd[157], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[159], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[162], lane_pair_of(0, 0));
     t->Qd[164] = 0;
-    t->Qd[166] = 0;
-    t->Qd[167] = 0;
+    lane_pair_store(&t->Qd[166], lane_pair_of(0, 0));
     t->Qd[169] = 0;
 }
 

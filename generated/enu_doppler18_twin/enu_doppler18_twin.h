@@ -190,10 +190,9 @@ typedef struct {
 /* Scratch memory of discretize. */
 typedef struct {
     enu_doppler18_twin_scalar term[2][ENU_DOPPLER18_TWIN_N_TERMS]; /* the Horner chain's odd levels
-            R_k (term[1]); the doubling's new values; S G */
+            R_k (term[1]) and F h (term[0], each entry twice); the doubling's new values; S G */
     enu_doppler18_twin_scalar S[ENU_DOPPLER18_TWIN_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)!
             (and the even levels R_k): each block row's dense segment, then the diagonal rows */
-    enu_doppler18_twin_scalar fh[ENU_DOPPLER18_TWIN_NNZ_F]; /* F h at the nonzeros of F */
     enu_doppler18_twin_scalar row_sum[ENU_DOPPLER18_TWIN_N_STATES]; /* balancing: off-diagonal row
             sums of D^-1 |F| D */
     enu_doppler18_twin_scalar col_sum[ENU_DOPPLER18_TWIN_N_STATES]; /* balancing: off-diagonal

@@ -353,30 +353,43 @@ static const signed char balance_exponent[GPS_PSEUDORANGE11_N_STATES] = { 11, 12
    power of two.  A plan on it that needs a doubling is retaken on rebalanced_norm. */
 static gps_pseudorange11_scalar balanced_norm(const gps_pseudorange11_matrices *restrict m)
 {
-    gps_pseudorange11_scalar v, norm = 0.0;
-    v = fabs(m->F[0]) * 2.0 + fabs(m->F[1]) * 0.015625 + fabs(m->F[2]) * 0.00048828125;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[3]) * 0.5 + fabs(m->F[4]) * 0.0078125 + fabs(m->F[5]) * 0.00048828125;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[6]) * 64.0 + fabs(m->F[7]) * 128.0 + fabs(m->F[8]) * 0.015625;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[9]) * 2048.0 + fabs(m->F[10]) * 2.0 + fabs(m->F[11]) * 0.5 + fabs(m->F[12]) *
-            1.52587890625e-05 + fabs(m->F[13]) * 3.0517578125e-05;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[14]) * 2048.0 + fabs(m->F[15]) * 0.5 + fabs(m->F[16]) * 0.25 + fabs(m->F[17]) *
-            7.62939453125e-06 + fabs(m->F[18]) * 1.52587890625e-05;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[19]) * 64.0 + fabs(m->F[20]) * 2.0 + fabs(m->F[21]) * 4.0 + fabs(m->F[22]) *
-            3.0517578125e-05 + fabs(m->F[23]) * 3.0517578125e-05;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[24]) + fabs(m->F[25]) * 2.0;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[26]) + fabs(m->F[27]) * 2.0;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[28]) * 0.5 + fabs(m->F[29]) * 0.5;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[30]) * 8.271806125530277e-25;
-    norm = v > norm ? v : norm;
+    gps_pseudorange11_scalar norm = 0.0;
+    lane_pair lanes;
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[9]), fabs(m->F[14])), lane_pair_of(2048.0,
+            2048.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[10]), fabs(m->F[15])),
+            lane_pair_of(2.0, 0.5));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[11]), fabs(m->F[16])),
+            lane_pair_of(0.5, 0.25));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[12]), fabs(m->F[17])),
+            lane_pair_of(1.52587890625e-05, 7.62939453125e-06));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[13]), fabs(m->F[18])),
+            lane_pair_of(3.0517578125e-05, 1.52587890625e-05));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[19]), fabs(m->F[0])), lane_pair_of(64.0, 2.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[20]), fabs(m->F[1])),
+            lane_pair_of(2.0, 0.015625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[21]), fabs(m->F[2])),
+            lane_pair_of(4.0, 0.00048828125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[22]), 0.0),
+            lane_pair_of(3.0517578125e-05, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[23]), 0.0),
+            lane_pair_of(3.0517578125e-05, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[3]), fabs(m->F[6])), lane_pair_of(0.5, 64.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[4]), fabs(m->F[7])),
+            lane_pair_of(0.0078125, 128.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[5]), fabs(m->F[8])),
+            lane_pair_of(0.00048828125, 0.015625));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[24]), fabs(m->F[26]));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[25]), fabs(m->F[27])),
+            lane_pair_of(2.0, 2.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[28]), fabs(m->F[30])), lane_pair_of(0.5,
+            8.271806125530277e-25));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[29]), 0.0), lane_pair_of(0.5, 1.0));
+    norm = lane_pair_max(lanes, norm);
     return norm;
 }
 
@@ -386,9 +399,12 @@ static gps_pseudorange11_scalar balanced_norm(const gps_pseudorange11_matrices *
            balancing
    in powers of two, starting from the fixed D (at the check operating point one sweep finds it a
            fixed
-   point) and stopped at a fixed point; the sums in the reference's order (row by row). */
-static gps_pseudorange11_scalar rebalanced_norm(const gps_pseudorange11_matrices *restrict m,
-        gps_pseudorange11_discretize_scratch *restrict w)
+   point) and stopped at a fixed point; the sums in the reference's order (row by row).
+   Not inlined: it runs only when a doubling is at stake, and inlined, gcc -O2 would keep
+   balanced_norm's |F_ij| on the stack for it on every call (bench/bench_cycle.py: 130
+   instructions at 18 states). */
+GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar rebalanced_norm(const gps_pseudorange11_matrices
+        *restrict m, gps_pseudorange11_discretize_scratch *restrict w)
 {
     gps_pseudorange11_scalar v, norm = 0.0;
     signed char exponent[GPS_PSEUDORANGE11_N_STATES]; /* within [-40, 40] */
@@ -640,219 +656,355 @@ static int taylor_plan(const gps_pseudorange11_scalar norm, const gps_pseudorang
 GPS_PSEUDORANGE11_BLOCK void horner_input(const gps_pseudorange11_matrices *restrict m,
         gps_pseudorange11_discretize_scratch *restrict w, const gps_pseudorange11_scalar h)
 {
-    w->fh[0] = m->F[0]*h;
-    w->fh[1] = m->F[1]*h;
-    w->fh[2] = m->F[2]*h;
-    w->fh[3] = m->F[3]*h;
-    w->fh[4] = m->F[4]*h;
-    w->fh[5] = m->F[5]*h;
-    w->fh[6] = m->F[6]*h;
-    w->fh[7] = m->F[7]*h;
-    w->fh[8] = m->F[8]*h;
-    w->fh[9] = m->F[9]*h;
-    w->fh[10] = m->F[10]*h;
-    w->fh[11] = m->F[11]*h;
-    w->fh[12] = m->F[12]*h;
-    w->fh[13] = m->F[13]*h;
-    w->fh[14] = m->F[14]*h;
-    w->fh[15] = m->F[15]*h;
-    w->fh[16] = m->F[16]*h;
-    w->fh[17] = m->F[17]*h;
-    w->fh[18] = m->F[18]*h;
-    w->fh[19] = m->F[19]*h;
-    w->fh[20] = m->F[20]*h;
-    w->fh[21] = m->F[21]*h;
-    w->fh[22] = m->F[22]*h;
-    w->fh[23] = m->F[23]*h;
-    w->fh[24] = m->F[24]*h;
-    w->fh[25] = m->F[25]*h;
-    w->fh[26] = m->F[26]*h;
-    w->fh[27] = m->F[27]*h;
-    w->fh[28] = m->F[28]*h;
-    w->fh[29] = m->F[29]*h;
-    w->fh[30] = m->F[30]*h;
+    gps_pseudorange11_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
+    lane_pair_store(&fh_pairs[0], lane_pair_of(m->F[0]*h, m->F[0]*h));
+    lane_pair_store(&fh_pairs[2], lane_pair_of(m->F[1]*h, m->F[1]*h));
+    lane_pair_store(&fh_pairs[4], lane_pair_of(m->F[2]*h, m->F[2]*h));
+    lane_pair_store(&fh_pairs[6], lane_pair_of(m->F[3]*h, m->F[3]*h));
+    lane_pair_store(&fh_pairs[8], lane_pair_of(m->F[4]*h, m->F[4]*h));
+    lane_pair_store(&fh_pairs[10], lane_pair_of(m->F[5]*h, m->F[5]*h));
+    lane_pair_store(&fh_pairs[12], lane_pair_of(m->F[6]*h, m->F[6]*h));
+    lane_pair_store(&fh_pairs[14], lane_pair_of(m->F[7]*h, m->F[7]*h));
+    lane_pair_store(&fh_pairs[16], lane_pair_of(m->F[8]*h, m->F[8]*h));
+    lane_pair_store(&fh_pairs[18], lane_pair_of(m->F[9]*h, m->F[9]*h));
+    lane_pair_store(&fh_pairs[20], lane_pair_of(m->F[10]*h, m->F[10]*h));
+    lane_pair_store(&fh_pairs[22], lane_pair_of(m->F[11]*h, m->F[11]*h));
+    lane_pair_store(&fh_pairs[24], lane_pair_of(m->F[12]*h, m->F[12]*h));
+    lane_pair_store(&fh_pairs[26], lane_pair_of(m->F[13]*h, m->F[13]*h));
+    lane_pair_store(&fh_pairs[28], lane_pair_of(m->F[14]*h, m->F[14]*h));
+    lane_pair_store(&fh_pairs[30], lane_pair_of(m->F[15]*h, m->F[15]*h));
+    lane_pair_store(&fh_pairs[32], lane_pair_of(m->F[16]*h, m->F[16]*h));
+    lane_pair_store(&fh_pairs[34], lane_pair_of(m->F[17]*h, m->F[17]*h));
+    lane_pair_store(&fh_pairs[36], lane_pair_of(m->F[18]*h, m->F[18]*h));
+    lane_pair_store(&fh_pairs[38], lane_pair_of(m->F[19]*h, m->F[19]*h));
+    lane_pair_store(&fh_pairs[40], lane_pair_of(m->F[20]*h, m->F[20]*h));
+    lane_pair_store(&fh_pairs[42], lane_pair_of(m->F[21]*h, m->F[21]*h));
+    lane_pair_store(&fh_pairs[44], lane_pair_of(m->F[22]*h, m->F[22]*h));
+    lane_pair_store(&fh_pairs[46], lane_pair_of(m->F[23]*h, m->F[23]*h));
+    lane_pair_store(&fh_pairs[48], lane_pair_of(m->F[24]*h, m->F[24]*h));
+    lane_pair_store(&fh_pairs[50], lane_pair_of(m->F[25]*h, m->F[25]*h));
+    lane_pair_store(&fh_pairs[52], lane_pair_of(m->F[26]*h, m->F[26]*h));
+    lane_pair_store(&fh_pairs[54], lane_pair_of(m->F[27]*h, m->F[27]*h));
+    lane_pair_store(&fh_pairs[56], lane_pair_of(m->F[28]*h, m->F[28]*h));
+    lane_pair_store(&fh_pairs[58], lane_pair_of(m->F[29]*h, m->F[29]*h));
+    lane_pair_store(&fh_pairs[60], lane_pair_of(m->F[30]*h, m->F[30]*h));
 }
 
 GPS_PSEUDORANGE11_BLOCK void horner_level_1_into_S(gps_pseudorange11_discretize_scratch *restrict w,
         const gps_pseudorange11_scalar c_out, const gps_pseudorange11_scalar c_in)
 {
+    const gps_pseudorange11_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     w->S[0] = c_out;
-    w->S[1] = w->fh[0]*c_in;
-    w->S[2] = w->fh[1]*c_in;
-    w->S[3] = w->fh[2]*c_in;
-    w->S[4] = 0;
-    w->S[5] = 0;
-    w->S[6] = 0;
-    w->S[7] = 0;
-    w->S[8] = 0;
-    w->S[9] = 0;
-    w->S[10] = w->fh[3]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[0], fh_pairs[2]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[1], pair);
+    }
+    w->S[3] = fh_pairs[4]*c_in;
+    lane_pair_store(&w->S[4], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[6], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[8], lane_pair_of(0, 0));
+    w->S[10] = fh_pairs[6]*c_in;
     w->S[11] = c_out;
-    w->S[12] = w->fh[4]*c_in;
+    w->S[12] = fh_pairs[8]*c_in;
     w->S[13] = 0;
-    w->S[14] = w->fh[5]*c_in;
-    w->S[15] = 0;
-    w->S[16] = 0;
-    w->S[17] = 0;
-    w->S[18] = 0;
+    w->S[14] = fh_pairs[10]*c_in;
+    lane_pair_store(&w->S[15], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[17], lane_pair_of(0, 0));
     w->S[19] = 0;
-    w->S[20] = w->fh[6]*c_in;
-    w->S[21] = w->fh[7]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[12], fh_pairs[14]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[20], pair);
+    }
     w->S[22] = c_out;
-    w->S[23] = 0;
-    w->S[24] = 0;
-    w->S[25] = w->fh[8]*c_in;
-    w->S[26] = 0;
-    w->S[27] = 0;
-    w->S[28] = 0;
-    w->S[29] = 0;
-    w->S[30] = w->fh[9]*c_in;
-    w->S[31] = 0;
-    w->S[32] = 0;
+    lane_pair_store(&w->S[23], lane_pair_of(0, 0));
+    w->S[25] = fh_pairs[16]*c_in;
+    lane_pair_store(&w->S[26], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[28], lane_pair_of(0, 0));
+    w->S[30] = fh_pairs[18]*c_in;
+    lane_pair_store(&w->S[31], lane_pair_of(0, 0));
     w->S[33] = c_out;
-    w->S[34] = w->fh[10]*c_in;
-    w->S[35] = w->fh[11]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[20], fh_pairs[22]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[34], pair);
+    }
     w->S[36] = 0;
-    w->S[37] = w->fh[12]*c_in;
-    w->S[38] = w->fh[13]*c_in;
-    w->S[39] = 0;
-    w->S[40] = 0;
-    w->S[41] = w->fh[14]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[24], fh_pairs[26]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[37], pair);
+    }
+    lane_pair_store(&w->S[39], lane_pair_of(0, 0));
+    w->S[41] = fh_pairs[28]*c_in;
     w->S[42] = 0;
-    w->S[43] = w->fh[15]*c_in;
+    w->S[43] = fh_pairs[30]*c_in;
     w->S[44] = c_out;
-    w->S[45] = w->fh[16]*c_in;
-    w->S[46] = w->fh[17]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[32], fh_pairs[34]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[45], pair);
+    }
     w->S[47] = 0;
-    w->S[48] = w->fh[18]*c_in;
-    w->S[49] = 0;
-    w->S[50] = 0;
+    w->S[48] = fh_pairs[36]*c_in;
+    lane_pair_store(&w->S[49], lane_pair_of(0, 0));
     w->S[51] = 0;
-    w->S[52] = w->fh[19]*c_in;
-    w->S[53] = w->fh[20]*c_in;
-    w->S[54] = w->fh[21]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[38], fh_pairs[40]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[52], pair);
+    }
+    w->S[54] = fh_pairs[42]*c_in;
     w->S[55] = c_out;
-    w->S[56] = w->fh[22]*c_in;
-    w->S[57] = w->fh[23]*c_in;
-    w->S[58] = 0;
-    w->S[59] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[44], fh_pairs[46]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[56], pair);
+    }
+    lane_pair_store(&w->S[58], lane_pair_of(0, 0));
     w->S[60] = 0;
     w->S[61] = c_out;
-    w->S[62] = w->fh[24]*c_in;
-    w->S[63] = w->fh[25]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[48], fh_pairs[50]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[62], pair);
+    }
     w->S[64] = 0;
-    w->S[65] = w->fh[26]*c_in;
+    w->S[65] = fh_pairs[52]*c_in;
     w->S[66] = c_out;
-    w->S[67] = w->fh[27]*c_in;
+    w->S[67] = fh_pairs[54]*c_in;
     w->S[68] = 0;
-    w->S[69] = w->fh[28]*c_in;
-    w->S[70] = w->fh[29]*c_in;
-    w->S[71] = c_out;
-    w->S[72] = c_out;
-    w->S[73] = w->fh[30]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[56], fh_pairs[58]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[69], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        lane_pair_store(&w->S[71], pair);
+    }
+    w->S[73] = fh_pairs[60]*c_in;
 }
 
 GPS_PSEUDORANGE11_BLOCK void horner_level_1_into_term(gps_pseudorange11_discretize_scratch *restrict
         w, const gps_pseudorange11_scalar c_out, const gps_pseudorange11_scalar c_in)
 {
+    const gps_pseudorange11_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     w->term[1][0] = c_out;
-    w->term[1][1] = w->fh[0]*c_in;
-    w->term[1][2] = w->fh[1]*c_in;
-    w->term[1][3] = w->fh[2]*c_in;
-    w->term[1][4] = 0;
-    w->term[1][5] = 0;
-    w->term[1][6] = 0;
-    w->term[1][7] = 0;
-    w->term[1][8] = 0;
-    w->term[1][9] = 0;
-    w->term[1][10] = w->fh[3]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[0], fh_pairs[2]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][1], pair);
+    }
+    w->term[1][3] = fh_pairs[4]*c_in;
+    lane_pair_store(&w->term[1][4], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][6], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][8], lane_pair_of(0, 0));
+    w->term[1][10] = fh_pairs[6]*c_in;
     w->term[1][11] = c_out;
-    w->term[1][12] = w->fh[4]*c_in;
+    w->term[1][12] = fh_pairs[8]*c_in;
     w->term[1][13] = 0;
-    w->term[1][14] = w->fh[5]*c_in;
-    w->term[1][15] = 0;
-    w->term[1][16] = 0;
-    w->term[1][17] = 0;
-    w->term[1][18] = 0;
+    w->term[1][14] = fh_pairs[10]*c_in;
+    lane_pair_store(&w->term[1][15], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][17], lane_pair_of(0, 0));
     w->term[1][19] = 0;
-    w->term[1][20] = w->fh[6]*c_in;
-    w->term[1][21] = w->fh[7]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[12], fh_pairs[14]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][20], pair);
+    }
     w->term[1][22] = c_out;
-    w->term[1][23] = 0;
-    w->term[1][24] = 0;
-    w->term[1][25] = w->fh[8]*c_in;
-    w->term[1][26] = 0;
-    w->term[1][27] = 0;
-    w->term[1][28] = 0;
-    w->term[1][29] = 0;
-    w->term[1][30] = w->fh[9]*c_in;
-    w->term[1][31] = 0;
-    w->term[1][32] = 0;
+    lane_pair_store(&w->term[1][23], lane_pair_of(0, 0));
+    w->term[1][25] = fh_pairs[16]*c_in;
+    lane_pair_store(&w->term[1][26], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][28], lane_pair_of(0, 0));
+    w->term[1][30] = fh_pairs[18]*c_in;
+    lane_pair_store(&w->term[1][31], lane_pair_of(0, 0));
     w->term[1][33] = c_out;
-    w->term[1][34] = w->fh[10]*c_in;
-    w->term[1][35] = w->fh[11]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[20], fh_pairs[22]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][34], pair);
+    }
     w->term[1][36] = 0;
-    w->term[1][37] = w->fh[12]*c_in;
-    w->term[1][38] = w->fh[13]*c_in;
-    w->term[1][39] = 0;
-    w->term[1][40] = 0;
-    w->term[1][41] = w->fh[14]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[24], fh_pairs[26]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][37], pair);
+    }
+    lane_pair_store(&w->term[1][39], lane_pair_of(0, 0));
+    w->term[1][41] = fh_pairs[28]*c_in;
     w->term[1][42] = 0;
-    w->term[1][43] = w->fh[15]*c_in;
+    w->term[1][43] = fh_pairs[30]*c_in;
     w->term[1][44] = c_out;
-    w->term[1][45] = w->fh[16]*c_in;
-    w->term[1][46] = w->fh[17]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[32], fh_pairs[34]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][45], pair);
+    }
     w->term[1][47] = 0;
-    w->term[1][48] = w->fh[18]*c_in;
-    w->term[1][49] = 0;
-    w->term[1][50] = 0;
+    w->term[1][48] = fh_pairs[36]*c_in;
+    lane_pair_store(&w->term[1][49], lane_pair_of(0, 0));
     w->term[1][51] = 0;
-    w->term[1][52] = w->fh[19]*c_in;
-    w->term[1][53] = w->fh[20]*c_in;
-    w->term[1][54] = w->fh[21]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[38], fh_pairs[40]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][52], pair);
+    }
+    w->term[1][54] = fh_pairs[42]*c_in;
     w->term[1][55] = c_out;
-    w->term[1][56] = w->fh[22]*c_in;
-    w->term[1][57] = w->fh[23]*c_in;
-    w->term[1][58] = 0;
-    w->term[1][59] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[44], fh_pairs[46]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][56], pair);
+    }
+    lane_pair_store(&w->term[1][58], lane_pair_of(0, 0));
     w->term[1][60] = 0;
     w->term[1][61] = c_out;
-    w->term[1][62] = w->fh[24]*c_in;
-    w->term[1][63] = w->fh[25]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[48], fh_pairs[50]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][62], pair);
+    }
     w->term[1][64] = 0;
-    w->term[1][65] = w->fh[26]*c_in;
+    w->term[1][65] = fh_pairs[52]*c_in;
     w->term[1][66] = c_out;
-    w->term[1][67] = w->fh[27]*c_in;
+    w->term[1][67] = fh_pairs[54]*c_in;
     w->term[1][68] = 0;
-    w->term[1][69] = w->fh[28]*c_in;
-    w->term[1][70] = w->fh[29]*c_in;
-    w->term[1][71] = c_out;
-    w->term[1][72] = c_out;
-    w->term[1][73] = w->fh[30]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[56], fh_pairs[58]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][69], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        lane_pair_store(&w->term[1][71], pair);
+    }
+    w->term[1][73] = fh_pairs[60]*c_in;
 }
 
 GPS_PSEUDORANGE11_BLOCK void horner_saturated_into_S(gps_pseudorange11_discretize_scratch *restrict
         w, const gps_pseudorange11_scalar c_out)
 {
+    const gps_pseudorange11_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 10; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][10+k] + w->fh[1]*w->term[1][20+k] + w->fh[2]*w->term[1][30+k];
-        w->S[10+k] = w->fh[3]*w->term[1][k] + w->fh[4]*w->term[1][20+k] + w->fh[5]*w->term[1][40+k];
-        w->S[20+k] = w->fh[6]*w->term[1][k] + w->fh[7]*w->term[1][10+k] + w->fh[8]*w->term[1][50+k];
-        w->S[30+k] = w->fh[9]*w->term[1][k] + w->fh[10]*w->term[1][40+k] +
-                w->fh[11]*w->term[1][50+k];
-        w->S[40+k] = w->fh[14]*w->term[1][10+k] + w->fh[15]*w->term[1][30+k] +
-                w->fh[16]*w->term[1][50+k];
-        w->S[50+k] = w->fh[19]*w->term[1][20+k] + w->fh[20]*w->term[1][30+k] +
-                w->fh[21]*w->term[1][40+k];
+    for (k = 0; k < 10; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->term[1][10+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->term[1][20+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->term[1][30+k]));
+        lane_pair_store(&w->S[k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[8]),
+                lane_pair_load(&w->term[1][20+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[10]),
+                lane_pair_load(&w->term[1][40+k]));
+        lane_pair_store(&w->S[10+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[12]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[14]),
+                lane_pair_load(&w->term[1][10+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[16]),
+                lane_pair_load(&w->term[1][50+k]));
+        lane_pair_store(&w->S[20+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[18]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->term[1][40+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->term[1][50+k]));
+        lane_pair_store(&w->S[30+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[28]),
+                lane_pair_load(&w->term[1][10+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[30]),
+                lane_pair_load(&w->term[1][30+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[32]),
+                lane_pair_load(&w->term[1][50+k]));
+        lane_pair_store(&w->S[40+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]),
+                lane_pair_load(&w->term[1][20+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->term[1][30+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->term[1][40+k]));
+        lane_pair_store(&w->S[50+k], lanes);
     }
-    for (k = 0; k < 4; ++k) {
-        w->S[60+k] = w->fh[24]*w->term[1][64+k] + w->fh[25]*w->term[1][68+k];
-        w->S[64+k] = w->fh[26]*w->term[1][60+k] + w->fh[27]*w->term[1][68+k];
-        w->S[68+k] = w->fh[28]*w->term[1][60+k] + w->fh[29]*w->term[1][64+k];
-        w->S[35+k] = w->S[35+k] + w->fh[12]*w->term[1][64+k] + w->fh[13]*w->term[1][68+k];
-        w->S[45+k] = w->S[45+k] + w->fh[17]*w->term[1][60+k] + w->fh[18]*w->term[1][68+k];
-        w->S[55+k] = w->S[55+k] + w->fh[22]*w->term[1][60+k] + w->fh[23]*w->term[1][64+k];
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->term[1][64]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->term[1][68]));
+        lane_pair_store(&w->S[60], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[52]),
+                lane_pair_load(&w->term[1][60]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->term[1][68]));
+        lane_pair_store(&w->S[64], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]),
+                lane_pair_load(&w->term[1][60]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->term[1][64]));
+        lane_pair_store(&w->S[68], lanes);
+        lanes = lane_pair_load(&w->S[35]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->term[1][64]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->term[1][68]));
+        lane_pair_store(&w->S[35], lanes);
+        lanes = lane_pair_load(&w->S[45]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->term[1][60]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->term[1][68]));
+        lane_pair_store(&w->S[45], lanes);
+        lanes = lane_pair_load(&w->S[55]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->term[1][60]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->term[1][64]));
+        lane_pair_store(&w->S[55], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->term[1][66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->term[1][70]));
+        lane_pair_store(&w->S[62], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[52]),
+                lane_pair_load(&w->term[1][62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->term[1][70]));
+        lane_pair_store(&w->S[66], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]),
+                lane_pair_load(&w->term[1][62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->term[1][66]));
+        lane_pair_store(&w->S[70], lanes);
+        lanes = lane_pair_load(&w->S[37]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->term[1][66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->term[1][70]));
+        lane_pair_store(&w->S[37], lanes);
+        lanes = lane_pair_load(&w->S[47]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->term[1][62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->term[1][70]));
+        lane_pair_store(&w->S[47], lanes);
+        lanes = lane_pair_load(&w->S[57]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->term[1][62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->term[1][66]));
+        lane_pair_store(&w->S[57], lanes);
     }
     w->S[0] = w->S[0] + c_out;
     w->S[11] = w->S[11] + c_out;
@@ -868,22 +1020,115 @@ GPS_PSEUDORANGE11_BLOCK void horner_saturated_into_S(gps_pseudorange11_discretiz
 GPS_PSEUDORANGE11_BLOCK void horner_saturated_into_term(gps_pseudorange11_discretize_scratch
         *restrict w, const gps_pseudorange11_scalar c_out)
 {
+    const gps_pseudorange11_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 10; ++k) {
-        w->term[1][k] = w->fh[0]*w->S[10+k] + w->fh[1]*w->S[20+k] + w->fh[2]*w->S[30+k];
-        w->term[1][10+k] = w->fh[3]*w->S[k] + w->fh[4]*w->S[20+k] + w->fh[5]*w->S[40+k];
-        w->term[1][20+k] = w->fh[6]*w->S[k] + w->fh[7]*w->S[10+k] + w->fh[8]*w->S[50+k];
-        w->term[1][30+k] = w->fh[9]*w->S[k] + w->fh[10]*w->S[40+k] + w->fh[11]*w->S[50+k];
-        w->term[1][40+k] = w->fh[14]*w->S[10+k] + w->fh[15]*w->S[30+k] + w->fh[16]*w->S[50+k];
-        w->term[1][50+k] = w->fh[19]*w->S[20+k] + w->fh[20]*w->S[30+k] + w->fh[21]*w->S[40+k];
+    for (k = 0; k < 10; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->S[10+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[20+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[30+k]));
+        lane_pair_store(&w->term[1][k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[6]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[8]),
+                lane_pair_load(&w->S[20+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[10]),
+                lane_pair_load(&w->S[40+k]));
+        lane_pair_store(&w->term[1][10+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[12]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[14]),
+                lane_pair_load(&w->S[10+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[16]),
+                lane_pair_load(&w->S[50+k]));
+        lane_pair_store(&w->term[1][20+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[18]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->S[40+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[50+k]));
+        lane_pair_store(&w->term[1][30+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[28]),
+                lane_pair_load(&w->S[10+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[30]),
+                lane_pair_load(&w->S[30+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[32]),
+                lane_pair_load(&w->S[50+k]));
+        lane_pair_store(&w->term[1][40+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]),
+                lane_pair_load(&w->S[20+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[30+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[40+k]));
+        lane_pair_store(&w->term[1][50+k], lanes);
     }
-    for (k = 0; k < 4; ++k) {
-        w->term[1][60+k] = w->fh[24]*w->S[64+k] + w->fh[25]*w->S[68+k];
-        w->term[1][64+k] = w->fh[26]*w->S[60+k] + w->fh[27]*w->S[68+k];
-        w->term[1][68+k] = w->fh[28]*w->S[60+k] + w->fh[29]*w->S[64+k];
-        w->term[1][35+k] = w->term[1][35+k] + w->fh[12]*w->S[64+k] + w->fh[13]*w->S[68+k];
-        w->term[1][45+k] = w->term[1][45+k] + w->fh[17]*w->S[60+k] + w->fh[18]*w->S[68+k];
-        w->term[1][55+k] = w->term[1][55+k] + w->fh[22]*w->S[60+k] + w->fh[23]*w->S[64+k];
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[48]), lane_pair_load(&w->S[64]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&w->term[1][60], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[52]), lane_pair_load(&w->S[60]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&w->term[1][64], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]), lane_pair_load(&w->S[60]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&w->term[1][68], lanes);
+        lanes = lane_pair_load(&w->term[1][35]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[64]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&w->term[1][35], lanes);
+        lanes = lane_pair_load(&w->term[1][45]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->S[60]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&w->term[1][45], lanes);
+        lanes = lane_pair_load(&w->term[1][55]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[60]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&w->term[1][55], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[48]), lane_pair_load(&w->S[66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&w->term[1][62], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[52]), lane_pair_load(&w->S[62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&w->term[1][66], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]), lane_pair_load(&w->S[62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&w->term[1][70], lanes);
+        lanes = lane_pair_load(&w->term[1][37]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&w->term[1][37], lanes);
+        lanes = lane_pair_load(&w->term[1][47]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->S[62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&w->term[1][47], lanes);
+        lanes = lane_pair_load(&w->term[1][57]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&w->term[1][57], lanes);
     }
     w->term[1][0] = w->term[1][0] + c_out;
     w->term[1][11] = w->term[1][11] + c_out;
@@ -899,22 +1144,115 @@ GPS_PSEUDORANGE11_BLOCK void horner_saturated_into_term(gps_pseudorange11_discre
 GPS_PSEUDORANGE11_BLOCK void horner_first_into_term(gps_pseudorange11_discretize_scratch *restrict
         w, const gps_pseudorange11_scalar c_out)
 {
+    const gps_pseudorange11_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 10; ++k) {
-        w->term[1][k] = w->fh[0]*w->S[10+k] + w->fh[1]*w->S[20+k] + w->fh[2]*w->S[30+k];
-        w->term[1][10+k] = w->fh[3]*w->S[k] + w->fh[4]*w->S[20+k] + w->fh[5]*w->S[40+k];
-        w->term[1][20+k] = w->fh[6]*w->S[k] + w->fh[7]*w->S[10+k] + w->fh[8]*w->S[50+k];
-        w->term[1][30+k] = w->fh[9]*w->S[k] + w->fh[10]*w->S[40+k] + w->fh[11]*w->S[50+k];
-        w->term[1][40+k] = w->fh[14]*w->S[10+k] + w->fh[15]*w->S[30+k] + w->fh[16]*w->S[50+k];
-        w->term[1][50+k] = w->fh[19]*w->S[20+k] + w->fh[20]*w->S[30+k] + w->fh[21]*w->S[40+k];
+    for (k = 0; k < 10; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->S[10+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[20+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[30+k]));
+        lane_pair_store(&w->term[1][k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[6]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[8]),
+                lane_pair_load(&w->S[20+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[10]),
+                lane_pair_load(&w->S[40+k]));
+        lane_pair_store(&w->term[1][10+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[12]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[14]),
+                lane_pair_load(&w->S[10+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[16]),
+                lane_pair_load(&w->S[50+k]));
+        lane_pair_store(&w->term[1][20+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[18]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->S[40+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[50+k]));
+        lane_pair_store(&w->term[1][30+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[28]),
+                lane_pair_load(&w->S[10+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[30]),
+                lane_pair_load(&w->S[30+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[32]),
+                lane_pair_load(&w->S[50+k]));
+        lane_pair_store(&w->term[1][40+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]),
+                lane_pair_load(&w->S[20+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[30+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[40+k]));
+        lane_pair_store(&w->term[1][50+k], lanes);
     }
-    for (k = 0; k < 4; ++k) {
-        w->term[1][60+k] = w->fh[24]*w->S[64+k] + w->fh[25]*w->S[68+k];
-        w->term[1][64+k] = w->fh[26]*w->S[60+k] + w->fh[27]*w->S[68+k];
-        w->term[1][68+k] = w->fh[28]*w->S[60+k] + w->fh[29]*w->S[64+k];
-        w->term[1][35+k] = w->term[1][35+k] + w->fh[12]*w->S[64+k] + w->fh[13]*w->S[68+k];
-        w->term[1][45+k] = w->term[1][45+k] + w->fh[17]*w->S[60+k] + w->fh[18]*w->S[68+k];
-        w->term[1][55+k] = w->term[1][55+k] + w->fh[22]*w->S[60+k] + w->fh[23]*w->S[64+k];
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[48]), lane_pair_load(&w->S[64]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&w->term[1][60], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[52]), lane_pair_load(&w->S[60]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&w->term[1][64], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]), lane_pair_load(&w->S[60]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&w->term[1][68], lanes);
+        lanes = lane_pair_load(&w->term[1][35]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[64]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&w->term[1][35], lanes);
+        lanes = lane_pair_load(&w->term[1][45]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->S[60]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&w->term[1][45], lanes);
+        lanes = lane_pair_load(&w->term[1][55]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[60]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&w->term[1][55], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[48]), lane_pair_load(&w->S[66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&w->term[1][62], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[52]), lane_pair_load(&w->S[62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&w->term[1][66], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]), lane_pair_load(&w->S[62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&w->term[1][70], lanes);
+        lanes = lane_pair_load(&w->term[1][37]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&w->term[1][37], lanes);
+        lanes = lane_pair_load(&w->term[1][47]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->S[62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&w->term[1][47], lanes);
+        lanes = lane_pair_load(&w->term[1][57]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&w->term[1][57], lanes);
     }
     w->term[1][0] = w->term[1][0] + c_out;
     w->term[1][11] = w->term[1][11] + c_out;
@@ -931,25 +1269,124 @@ GPS_PSEUDORANGE11_BLOCK void horner_first_into_term(gps_pseudorange11_discretize
 GPS_PSEUDORANGE11_BLOCK void horner_last_into_S(gps_pseudorange11_discretize_scratch *restrict w,
         const gps_pseudorange11_scalar c_out)
 {
+    const gps_pseudorange11_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 10; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][10+k] + w->fh[1]*w->term[1][20+k] + w->fh[2]*w->term[1][30+k];
-        w->S[10+k] = w->fh[3]*w->term[1][k] + w->fh[4]*w->term[1][20+k] + w->fh[5]*w->term[1][40+k];
-        w->S[20+k] = w->fh[6]*w->term[1][k] + w->fh[7]*w->term[1][10+k] + w->fh[8]*w->term[1][50+k];
-        w->S[30+k] = w->fh[9]*w->term[1][k] + w->fh[10]*w->term[1][40+k] +
-                w->fh[11]*w->term[1][50+k];
-        w->S[40+k] = w->fh[14]*w->term[1][10+k] + w->fh[15]*w->term[1][30+k] +
-                w->fh[16]*w->term[1][50+k];
-        w->S[50+k] = w->fh[19]*w->term[1][20+k] + w->fh[20]*w->term[1][30+k] +
-                w->fh[21]*w->term[1][40+k];
+    for (k = 0; k < 10; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->term[1][10+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->term[1][20+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->term[1][30+k]));
+        lane_pair_store(&w->S[k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[8]),
+                lane_pair_load(&w->term[1][20+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[10]),
+                lane_pair_load(&w->term[1][40+k]));
+        lane_pair_store(&w->S[10+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[12]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[14]),
+                lane_pair_load(&w->term[1][10+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[16]),
+                lane_pair_load(&w->term[1][50+k]));
+        lane_pair_store(&w->S[20+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[18]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->term[1][40+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->term[1][50+k]));
+        lane_pair_store(&w->S[30+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[28]),
+                lane_pair_load(&w->term[1][10+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[30]),
+                lane_pair_load(&w->term[1][30+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[32]),
+                lane_pair_load(&w->term[1][50+k]));
+        lane_pair_store(&w->S[40+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]),
+                lane_pair_load(&w->term[1][20+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->term[1][30+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->term[1][40+k]));
+        lane_pair_store(&w->S[50+k], lanes);
     }
-    for (k = 0; k < 4; ++k) {
-        w->S[60+k] = w->fh[24]*w->term[1][64+k] + w->fh[25]*w->term[1][68+k];
-        w->S[64+k] = w->fh[26]*w->term[1][60+k] + w->fh[27]*w->term[1][68+k];
-        w->S[68+k] = w->fh[28]*w->term[1][60+k] + w->fh[29]*w->term[1][64+k];
-        w->S[35+k] = w->S[35+k] + w->fh[12]*w->term[1][64+k] + w->fh[13]*w->term[1][68+k];
-        w->S[45+k] = w->S[45+k] + w->fh[17]*w->term[1][60+k] + w->fh[18]*w->term[1][68+k];
-        w->S[55+k] = w->S[55+k] + w->fh[22]*w->term[1][60+k] + w->fh[23]*w->term[1][64+k];
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->term[1][64]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->term[1][68]));
+        lane_pair_store(&w->S[60], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[52]),
+                lane_pair_load(&w->term[1][60]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->term[1][68]));
+        lane_pair_store(&w->S[64], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]),
+                lane_pair_load(&w->term[1][60]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->term[1][64]));
+        lane_pair_store(&w->S[68], lanes);
+        lanes = lane_pair_load(&w->S[35]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->term[1][64]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->term[1][68]));
+        lane_pair_store(&w->S[35], lanes);
+        lanes = lane_pair_load(&w->S[45]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->term[1][60]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->term[1][68]));
+        lane_pair_store(&w->S[45], lanes);
+        lanes = lane_pair_load(&w->S[55]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->term[1][60]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->term[1][64]));
+        lane_pair_store(&w->S[55], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->term[1][66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->term[1][70]));
+        lane_pair_store(&w->S[62], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[52]),
+                lane_pair_load(&w->term[1][62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->term[1][70]));
+        lane_pair_store(&w->S[66], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]),
+                lane_pair_load(&w->term[1][62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->term[1][66]));
+        lane_pair_store(&w->S[70], lanes);
+        lanes = lane_pair_load(&w->S[37]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->term[1][66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->term[1][70]));
+        lane_pair_store(&w->S[37], lanes);
+        lanes = lane_pair_load(&w->S[47]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->term[1][62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->term[1][70]));
+        lane_pair_store(&w->S[47], lanes);
+        lanes = lane_pair_load(&w->S[57]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->term[1][62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->term[1][66]));
+        lane_pair_store(&w->S[57], lanes);
     }
     w->S[0] = w->S[0] + c_out;
     w->S[11] = w->S[11] + c_out;
@@ -961,33 +1398,71 @@ GPS_PSEUDORANGE11_BLOCK void horner_last_into_S(gps_pseudorange11_discretize_scr
     w->S[66] = w->S[66] + c_out;
     w->S[71] = w->S[71] + c_out;
     w->S[72] = c_out;
-    w->S[73] = w->term[1][72]*w->fh[30];
+    w->S[73] = w->term[1][72]*fh_pairs[60];
 }
 
 GPS_PSEUDORANGE11_BLOCK void horner_transition(gps_pseudorange11_transition *restrict t, const
         gps_pseudorange11_discretize_scratch *restrict w)
 {
     const gps_pseudorange11_scalar one = 1.0;
+    const gps_pseudorange11_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
     for (k = 0; k < 9; ++k) {
-        t->Phi[k] = w->fh[0]*w->S[10+k] + w->fh[1]*w->S[20+k] + w->fh[2]*w->S[30+k];
-        t->Phi[9+k] = w->fh[3]*w->S[k] + w->fh[4]*w->S[20+k] + w->fh[5]*w->S[40+k];
-        t->Phi[18+k] = w->fh[6]*w->S[k] + w->fh[7]*w->S[10+k] + w->fh[8]*w->S[50+k];
-        t->Phi[27+k] = w->fh[9]*w->S[k] + w->fh[10]*w->S[40+k] + w->fh[11]*w->S[50+k];
-        t->Phi[36+k] = w->fh[14]*w->S[10+k] + w->fh[15]*w->S[30+k] + w->fh[16]*w->S[50+k];
-        t->Phi[45+k] = w->fh[19]*w->S[20+k] + w->fh[20]*w->S[30+k] + w->fh[21]*w->S[40+k];
+        t->Phi[k] = fh_pairs[0]*w->S[10+k] + fh_pairs[2]*w->S[20+k] + fh_pairs[4]*w->S[30+k];
+        t->Phi[9+k] = fh_pairs[6]*w->S[k] + fh_pairs[8]*w->S[20+k] + fh_pairs[10]*w->S[40+k];
+        t->Phi[18+k] = fh_pairs[12]*w->S[k] + fh_pairs[14]*w->S[10+k] + fh_pairs[16]*w->S[50+k];
+        t->Phi[27+k] = fh_pairs[18]*w->S[k] + fh_pairs[20]*w->S[40+k] + fh_pairs[22]*w->S[50+k];
+        t->Phi[36+k] = fh_pairs[28]*w->S[10+k] + fh_pairs[30]*w->S[30+k] + fh_pairs[32]*w->S[50+k];
+        t->Phi[45+k] = fh_pairs[38]*w->S[20+k] + fh_pairs[40]*w->S[30+k] + fh_pairs[42]*w->S[40+k];
     }
     for (k = 0; k < 3; ++k) {
-        t->Phi[54+k] = w->fh[24]*w->S[65+k] + w->fh[25]*w->S[69+k];
-        t->Phi[57+k] = w->fh[26]*w->S[61+k] + w->fh[27]*w->S[69+k];
-        t->Phi[60+k] = w->fh[28]*w->S[61+k] + w->fh[29]*w->S[65+k];
+        t->Phi[54+k] = fh_pairs[48]*w->S[65+k] + fh_pairs[50]*w->S[69+k];
+        t->Phi[57+k] = fh_pairs[52]*w->S[61+k] + fh_pairs[54]*w->S[69+k];
+        t->Phi[60+k] = fh_pairs[56]*w->S[61+k] + fh_pairs[58]*w->S[65+k];
     }
-    for (k = 0; k < 4; ++k) {
-        t->Phi[32+k] = t->Phi[32+k] + w->fh[12]*w->S[64+k] + w->fh[13]*w->S[68+k];
-        t->Phi[41+k] = t->Phi[41+k] + w->fh[17]*w->S[60+k] + w->fh[18]*w->S[68+k];
-        t->Phi[50+k] = t->Phi[50+k] + w->fh[22]*w->S[60+k] + w->fh[23]*w->S[64+k];
+    {
+        lane_pair lanes;
+        lanes = lane_pair_load(&t->Phi[32]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[64]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[32], lanes);
+        lanes = lane_pair_load(&t->Phi[41]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->S[60]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[41], lanes);
+        lanes = lane_pair_load(&t->Phi[50]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[60]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[50], lanes);
     }
-    t->Phi[64] = w->S[72]*w->fh[30];
+    {
+        lane_pair lanes;
+        lanes = lane_pair_load(&t->Phi[34]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[66]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[26]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[34], lanes);
+        lanes = lane_pair_load(&t->Phi[43]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->S[62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[43], lanes);
+        lanes = lane_pair_load(&t->Phi[52]);
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[62]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[52], lanes);
+    }
+    t->Phi[64] = w->S[72]*fh_pairs[60];
     t->Phi[63] = 0;
     t->Phi[65] = one;
 }
@@ -1125,135 +1600,375 @@ GPS_PSEUDORANGE11_BLOCK void doubling(gps_pseudorange11_transition *restrict t,
         w->term[1][63+k] = t->Phi[63]*w->S[72+k];
     }
     w->term[1][64] = w->term[1][64] + t->Phi[64];
-    t->Phi[0] = t->Phi[0] + t->Phi[0] + w->term[0][0];
-    t->Phi[1] = t->Phi[1] + t->Phi[1] + w->term[0][1];
-    t->Phi[2] = t->Phi[2] + t->Phi[2] + w->term[0][2];
-    t->Phi[3] = t->Phi[3] + t->Phi[3] + w->term[0][3];
-    t->Phi[4] = t->Phi[4] + t->Phi[4] + w->term[0][4];
-    t->Phi[5] = t->Phi[5] + t->Phi[5] + w->term[0][5];
-    t->Phi[6] = t->Phi[6] + t->Phi[6] + w->term[0][6];
-    t->Phi[7] = t->Phi[7] + t->Phi[7] + w->term[0][7];
-    t->Phi[8] = t->Phi[8] + t->Phi[8] + w->term[0][8];
-    t->Phi[9] = t->Phi[9] + t->Phi[9] + w->term[0][9];
-    t->Phi[10] = t->Phi[10] + t->Phi[10] + w->term[0][10];
-    t->Phi[11] = t->Phi[11] + t->Phi[11] + w->term[0][11];
-    t->Phi[12] = t->Phi[12] + t->Phi[12] + w->term[0][12];
-    t->Phi[13] = t->Phi[13] + t->Phi[13] + w->term[0][13];
-    t->Phi[14] = t->Phi[14] + t->Phi[14] + w->term[0][14];
-    t->Phi[15] = t->Phi[15] + t->Phi[15] + w->term[0][15];
-    t->Phi[16] = t->Phi[16] + t->Phi[16] + w->term[0][16];
-    t->Phi[17] = t->Phi[17] + t->Phi[17] + w->term[0][17];
-    t->Phi[18] = t->Phi[18] + t->Phi[18] + w->term[0][18];
-    t->Phi[19] = t->Phi[19] + t->Phi[19] + w->term[0][19];
-    t->Phi[20] = t->Phi[20] + t->Phi[20] + w->term[0][20];
-    t->Phi[21] = t->Phi[21] + t->Phi[21] + w->term[0][21];
-    t->Phi[22] = t->Phi[22] + t->Phi[22] + w->term[0][22];
-    t->Phi[23] = t->Phi[23] + t->Phi[23] + w->term[0][23];
-    t->Phi[24] = t->Phi[24] + t->Phi[24] + w->term[0][24];
-    t->Phi[25] = t->Phi[25] + t->Phi[25] + w->term[0][25];
-    t->Phi[26] = t->Phi[26] + t->Phi[26] + w->term[0][26];
-    t->Phi[27] = t->Phi[27] + t->Phi[27] + w->term[0][27];
-    t->Phi[28] = t->Phi[28] + t->Phi[28] + w->term[0][28];
-    t->Phi[29] = t->Phi[29] + t->Phi[29] + w->term[0][29];
-    t->Phi[30] = t->Phi[30] + t->Phi[30] + w->term[0][30];
-    t->Phi[31] = t->Phi[31] + t->Phi[31] + w->term[0][31];
-    t->Phi[32] = t->Phi[32] + t->Phi[32] + w->term[0][32];
-    t->Phi[33] = t->Phi[33] + t->Phi[33] + w->term[0][33];
-    t->Phi[34] = t->Phi[34] + t->Phi[34] + w->term[0][34];
-    t->Phi[35] = t->Phi[35] + t->Phi[35] + w->term[0][35];
-    t->Phi[36] = t->Phi[36] + t->Phi[36] + w->term[0][36];
-    t->Phi[37] = t->Phi[37] + t->Phi[37] + w->term[0][37];
-    t->Phi[38] = t->Phi[38] + t->Phi[38] + w->term[0][38];
-    t->Phi[39] = t->Phi[39] + t->Phi[39] + w->term[0][39];
-    t->Phi[40] = t->Phi[40] + t->Phi[40] + w->term[0][40];
-    t->Phi[41] = t->Phi[41] + t->Phi[41] + w->term[0][41];
-    t->Phi[42] = t->Phi[42] + t->Phi[42] + w->term[0][42];
-    t->Phi[43] = t->Phi[43] + t->Phi[43] + w->term[0][43];
-    t->Phi[44] = t->Phi[44] + t->Phi[44] + w->term[0][44];
-    t->Phi[45] = t->Phi[45] + t->Phi[45] + w->term[0][45];
-    t->Phi[46] = t->Phi[46] + t->Phi[46] + w->term[0][46];
-    t->Phi[47] = t->Phi[47] + t->Phi[47] + w->term[0][47];
-    t->Phi[48] = t->Phi[48] + t->Phi[48] + w->term[0][48];
-    t->Phi[49] = t->Phi[49] + t->Phi[49] + w->term[0][49];
-    t->Phi[50] = t->Phi[50] + t->Phi[50] + w->term[0][50];
-    t->Phi[51] = t->Phi[51] + t->Phi[51] + w->term[0][51];
-    t->Phi[52] = t->Phi[52] + t->Phi[52] + w->term[0][52];
-    t->Phi[53] = t->Phi[53] + t->Phi[53] + w->term[0][53];
-    t->Phi[54] = t->Phi[54] + t->Phi[54] + w->term[0][54];
-    t->Phi[55] = t->Phi[55] + t->Phi[55] + w->term[0][55];
-    t->Phi[56] = t->Phi[56] + t->Phi[56] + w->term[0][56];
-    t->Phi[57] = t->Phi[57] + t->Phi[57] + w->term[0][57];
-    t->Phi[58] = t->Phi[58] + t->Phi[58] + w->term[0][58];
-    t->Phi[59] = t->Phi[59] + t->Phi[59] + w->term[0][59];
-    t->Phi[60] = t->Phi[60] + t->Phi[60] + w->term[0][60];
-    t->Phi[61] = t->Phi[61] + t->Phi[61] + w->term[0][61];
-    t->Phi[62] = t->Phi[62] + t->Phi[62] + w->term[0][62];
-    t->Phi[63] = t->Phi[63] + t->Phi[63] + w->term[0][63];
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[0]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[0]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][0]));
+        lane_pair_store(&t->Phi[0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[2]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[2]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][2]));
+        lane_pair_store(&t->Phi[2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[4]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[4]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][4]));
+        lane_pair_store(&t->Phi[4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[6]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[6]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][6]));
+        lane_pair_store(&t->Phi[6], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[8]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[8]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][8]));
+        lane_pair_store(&t->Phi[8], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[10]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[10]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][10]));
+        lane_pair_store(&t->Phi[10], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[12]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[12]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][12]));
+        lane_pair_store(&t->Phi[12], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[14]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[14]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][14]));
+        lane_pair_store(&t->Phi[14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[16]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[16]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][16]));
+        lane_pair_store(&t->Phi[16], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[18]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[18]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][18]));
+        lane_pair_store(&t->Phi[18], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[20]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[20]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][20]));
+        lane_pair_store(&t->Phi[20], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[22]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[22]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][22]));
+        lane_pair_store(&t->Phi[22], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[24]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[24]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][24]));
+        lane_pair_store(&t->Phi[24], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[26]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[26]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][26]));
+        lane_pair_store(&t->Phi[26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[28]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[28]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][28]));
+        lane_pair_store(&t->Phi[28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[30]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[30]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][30]));
+        lane_pair_store(&t->Phi[30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[32]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[32]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][32]));
+        lane_pair_store(&t->Phi[32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[34]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[34]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][34]));
+        lane_pair_store(&t->Phi[34], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[36]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[36]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][36]));
+        lane_pair_store(&t->Phi[36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[38]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[38]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][38]));
+        lane_pair_store(&t->Phi[38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[40]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[40]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][40]));
+        lane_pair_store(&t->Phi[40], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[42]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[42]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][42]));
+        lane_pair_store(&t->Phi[42], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[44]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[44]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][44]));
+        lane_pair_store(&t->Phi[44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[46]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[46]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][46]));
+        lane_pair_store(&t->Phi[46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[48]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[48]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][48]));
+        lane_pair_store(&t->Phi[48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[50]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[50]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][50]));
+        lane_pair_store(&t->Phi[50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[52]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[52]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][52]));
+        lane_pair_store(&t->Phi[52], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[54]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[54]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][54]));
+        lane_pair_store(&t->Phi[54], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[56]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[56]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][56]));
+        lane_pair_store(&t->Phi[56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[58]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[58]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][58]));
+        lane_pair_store(&t->Phi[58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[60]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[60]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][60]));
+        lane_pair_store(&t->Phi[60], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[62]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[62]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][62]));
+        lane_pair_store(&t->Phi[62], pair);
+    }
     t->Phi[64] = t->Phi[64] + t->Phi[64] + w->term[0][64];
-    w->S[0] = w->S[0] + half*w->term[1][0];
-    w->S[1] = w->S[1] + half*w->term[1][1];
-    w->S[2] = w->S[2] + half*w->term[1][2];
-    w->S[3] = w->S[3] + half*w->term[1][3];
-    w->S[4] = w->S[4] + half*w->term[1][4];
-    w->S[5] = w->S[5] + half*w->term[1][5];
-    w->S[6] = w->S[6] + half*w->term[1][6];
-    w->S[7] = w->S[7] + half*w->term[1][7];
+    {
+        lane_pair pair = lane_pair_load(&w->S[0]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][0]));
+        lane_pair_store(&w->S[0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[2]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][2]));
+        lane_pair_store(&w->S[2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[4]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][4]));
+        lane_pair_store(&w->S[4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[6]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][6]));
+        lane_pair_store(&w->S[6], pair);
+    }
     w->S[8] = w->S[8] + half*w->term[1][8];
-    w->S[10] = w->S[10] + half*w->term[1][9];
-    w->S[11] = w->S[11] + half*w->term[1][10];
-    w->S[12] = w->S[12] + half*w->term[1][11];
-    w->S[13] = w->S[13] + half*w->term[1][12];
-    w->S[14] = w->S[14] + half*w->term[1][13];
-    w->S[15] = w->S[15] + half*w->term[1][14];
-    w->S[16] = w->S[16] + half*w->term[1][15];
-    w->S[17] = w->S[17] + half*w->term[1][16];
+    {
+        lane_pair pair = lane_pair_load(&w->S[10]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][9]));
+        lane_pair_store(&w->S[10], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[12]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][11]));
+        lane_pair_store(&w->S[12], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[14]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][13]));
+        lane_pair_store(&w->S[14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[16]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][15]));
+        lane_pair_store(&w->S[16], pair);
+    }
     w->S[18] = w->S[18] + half*w->term[1][17];
-    w->S[20] = w->S[20] + half*w->term[1][18];
-    w->S[21] = w->S[21] + half*w->term[1][19];
-    w->S[22] = w->S[22] + half*w->term[1][20];
-    w->S[23] = w->S[23] + half*w->term[1][21];
-    w->S[24] = w->S[24] + half*w->term[1][22];
-    w->S[25] = w->S[25] + half*w->term[1][23];
-    w->S[26] = w->S[26] + half*w->term[1][24];
-    w->S[27] = w->S[27] + half*w->term[1][25];
+    {
+        lane_pair pair = lane_pair_load(&w->S[20]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][18]));
+        lane_pair_store(&w->S[20], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[22]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][20]));
+        lane_pair_store(&w->S[22], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[24]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][22]));
+        lane_pair_store(&w->S[24], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[26]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][24]));
+        lane_pair_store(&w->S[26], pair);
+    }
     w->S[28] = w->S[28] + half*w->term[1][26];
-    w->S[30] = w->S[30] + half*w->term[1][27];
-    w->S[31] = w->S[31] + half*w->term[1][28];
-    w->S[32] = w->S[32] + half*w->term[1][29];
-    w->S[33] = w->S[33] + half*w->term[1][30];
-    w->S[34] = w->S[34] + half*w->term[1][31];
-    w->S[35] = w->S[35] + half*w->term[1][32];
-    w->S[36] = w->S[36] + half*w->term[1][33];
-    w->S[37] = w->S[37] + half*w->term[1][34];
+    {
+        lane_pair pair = lane_pair_load(&w->S[30]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][27]));
+        lane_pair_store(&w->S[30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[32]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][29]));
+        lane_pair_store(&w->S[32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[34]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][31]));
+        lane_pair_store(&w->S[34], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[36]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][33]));
+        lane_pair_store(&w->S[36], pair);
+    }
     w->S[38] = w->S[38] + half*w->term[1][35];
-    w->S[40] = w->S[40] + half*w->term[1][36];
-    w->S[41] = w->S[41] + half*w->term[1][37];
-    w->S[42] = w->S[42] + half*w->term[1][38];
-    w->S[43] = w->S[43] + half*w->term[1][39];
-    w->S[44] = w->S[44] + half*w->term[1][40];
-    w->S[45] = w->S[45] + half*w->term[1][41];
-    w->S[46] = w->S[46] + half*w->term[1][42];
-    w->S[47] = w->S[47] + half*w->term[1][43];
+    {
+        lane_pair pair = lane_pair_load(&w->S[40]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][36]));
+        lane_pair_store(&w->S[40], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[42]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][38]));
+        lane_pair_store(&w->S[42], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[44]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][40]));
+        lane_pair_store(&w->S[44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[46]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][42]));
+        lane_pair_store(&w->S[46], pair);
+    }
     w->S[48] = w->S[48] + half*w->term[1][44];
-    w->S[50] = w->S[50] + half*w->term[1][45];
-    w->S[51] = w->S[51] + half*w->term[1][46];
-    w->S[52] = w->S[52] + half*w->term[1][47];
-    w->S[53] = w->S[53] + half*w->term[1][48];
-    w->S[54] = w->S[54] + half*w->term[1][49];
-    w->S[55] = w->S[55] + half*w->term[1][50];
-    w->S[56] = w->S[56] + half*w->term[1][51];
-    w->S[57] = w->S[57] + half*w->term[1][52];
+    {
+        lane_pair pair = lane_pair_load(&w->S[50]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][45]));
+        lane_pair_store(&w->S[50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[52]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][47]));
+        lane_pair_store(&w->S[52], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[54]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][49]));
+        lane_pair_store(&w->S[54], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[56]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][51]));
+        lane_pair_store(&w->S[56], pair);
+    }
     w->S[58] = w->S[58] + half*w->term[1][53];
-    w->S[61] = w->S[61] + half*w->term[1][54];
-    w->S[62] = w->S[62] + half*w->term[1][55];
+    {
+        lane_pair pair = lane_pair_load(&w->S[61]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][54]));
+        lane_pair_store(&w->S[61], pair);
+    }
     w->S[63] = w->S[63] + half*w->term[1][56];
-    w->S[65] = w->S[65] + half*w->term[1][57];
-    w->S[66] = w->S[66] + half*w->term[1][58];
+    {
+        lane_pair pair = lane_pair_load(&w->S[65]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][57]));
+        lane_pair_store(&w->S[65], pair);
+    }
     w->S[67] = w->S[67] + half*w->term[1][59];
-    w->S[69] = w->S[69] + half*w->term[1][60];
-    w->S[70] = w->S[70] + half*w->term[1][61];
-    w->S[71] = w->S[71] + half*w->term[1][62];
-    w->S[72] = w->S[72] + half*w->term[1][63];
+    {
+        lane_pair pair = lane_pair_load(&w->S[69]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][60]));
+        lane_pair_store(&w->S[69], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[71]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][62]));
+        lane_pair_store(&w->S[71], pair);
+    }
     w->S[73] = w->S[73] + half*w->term[1][64];
 }
 
@@ -1270,8 +1985,11 @@ GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar transition_check(gps_pseudorang
     t->Phi[50] = t->Phi[50] + one;
     t->Phi[54] = t->Phi[54] + one;
     t->Phi[58] = t->Phi[58] + one;
-    t->Phi[62] = t->Phi[62] + one;
-    t->Phi[63] = t->Phi[63] + one;
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[62]);
+        pair = lane_pair_add(pair, lane_pair_of(one, one));
+        lane_pair_store(&t->Phi[62], pair);
+    }
     v = t->Phi[0] + t->Phi[1] + t->Phi[2] + t->Phi[3] + t->Phi[4] + t->Phi[5] + t->Phi[6] +
             t->Phi[7] + t->Phi[8] + t->Phi[9] + t->Phi[10] + t->Phi[11] + t->Phi[12] + t->Phi[13] +
             t->Phi[14] + t->Phi[15] + t->Phi[16] + t->Phi[17] + t->Phi[18] + t->Phi[19] + t->Phi[20]
@@ -1289,52 +2007,84 @@ GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar transition_check(gps_pseudorang
 GPS_PSEUDORANGE11_BLOCK void noise_input(const gps_pseudorange11_matrices *restrict m,
         gps_pseudorange11_discretize_scratch *restrict w)
 {
-    w->term[0][0] = w->S[6]*m->G[3];
-    w->term[0][1] = w->S[7]*m->G[4];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[6]), lane_pair_load(&m->G[3]));
+        lane_pair_store(&w->term[0][0], pair);
+    }
     w->term[0][2] = w->S[8]*m->G[5];
-    w->term[0][3] = w->S[3]*m->G[0];
-    w->term[0][4] = w->S[4]*m->G[1];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[3]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][3], pair);
+    }
     w->term[0][5] = w->S[5]*m->G[2];
-    w->term[0][6] = w->S[16]*m->G[3];
-    w->term[0][7] = w->S[17]*m->G[4];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[16]), lane_pair_load(&m->G[3]));
+        lane_pair_store(&w->term[0][6], pair);
+    }
     w->term[0][8] = w->S[18]*m->G[5];
-    w->term[0][9] = w->S[13]*m->G[0];
-    w->term[0][10] = w->S[14]*m->G[1];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[13]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][9], pair);
+    }
     w->term[0][11] = w->S[15]*m->G[2];
-    w->term[0][12] = w->S[26]*m->G[3];
-    w->term[0][13] = w->S[27]*m->G[4];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[26]), lane_pair_load(&m->G[3]));
+        lane_pair_store(&w->term[0][12], pair);
+    }
     w->term[0][14] = w->S[28]*m->G[5];
-    w->term[0][15] = w->S[23]*m->G[0];
-    w->term[0][16] = w->S[24]*m->G[1];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[23]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][15], pair);
+    }
     w->term[0][17] = w->S[25]*m->G[2];
-    w->term[0][18] = w->S[36]*m->G[3];
-    w->term[0][19] = w->S[37]*m->G[4];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[36]), lane_pair_load(&m->G[3]));
+        lane_pair_store(&w->term[0][18], pair);
+    }
     w->term[0][20] = w->S[38]*m->G[5];
-    w->term[0][21] = w->S[33]*m->G[0];
-    w->term[0][22] = w->S[34]*m->G[1];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[33]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][21], pair);
+    }
     w->term[0][23] = w->S[35]*m->G[2];
-    w->term[0][24] = w->S[46]*m->G[3];
-    w->term[0][25] = w->S[47]*m->G[4];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[46]), lane_pair_load(&m->G[3]));
+        lane_pair_store(&w->term[0][24], pair);
+    }
     w->term[0][26] = w->S[48]*m->G[5];
-    w->term[0][27] = w->S[43]*m->G[0];
-    w->term[0][28] = w->S[44]*m->G[1];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[43]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][27], pair);
+    }
     w->term[0][29] = w->S[45]*m->G[2];
-    w->term[0][30] = w->S[56]*m->G[3];
-    w->term[0][31] = w->S[57]*m->G[4];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[56]), lane_pair_load(&m->G[3]));
+        lane_pair_store(&w->term[0][30], pair);
+    }
     w->term[0][32] = w->S[58]*m->G[5];
-    w->term[0][33] = w->S[53]*m->G[0];
-    w->term[0][34] = w->S[54]*m->G[1];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[53]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][33], pair);
+    }
     w->term[0][35] = w->S[55]*m->G[2];
-    w->term[0][36] = w->S[61]*m->G[3];
-    w->term[0][37] = w->S[62]*m->G[4];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[61]), lane_pair_load(&m->G[3]));
+        lane_pair_store(&w->term[0][36], pair);
+    }
     w->term[0][38] = w->S[63]*m->G[5];
-    w->term[0][39] = w->S[65]*m->G[3];
-    w->term[0][40] = w->S[66]*m->G[4];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[65]), lane_pair_load(&m->G[3]));
+        lane_pair_store(&w->term[0][39], pair);
+    }
     w->term[0][41] = w->S[67]*m->G[5];
-    w->term[0][42] = w->S[69]*m->G[3];
-    w->term[0][43] = w->S[70]*m->G[4];
-    w->term[0][44] = w->S[71]*m->G[5];
-    w->term[0][45] = w->S[72]*m->G[6];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[69]), lane_pair_load(&m->G[3]));
+        lane_pair_store(&w->term[0][42], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[71]), lane_pair_load(&m->G[5]));
+        lane_pair_store(&w->term[0][44], pair);
+    }
     w->term[0][46] = w->S[73]*m->G[7];
     w->term[0][47] = m->G[7];
 }
@@ -1407,24 +2157,15 @@ GPS_PSEUDORANGE11_BLOCK void process_noise(const gps_pseudorange11_matrices *res
     w->term[1][45] = w->term[0][45]*w->term[1][54];
     w->term[1][46] = w->term[0][46]*w->term[1][55];
     w->term[1][47] = w->term[0][47]*w->term[1][55];
-    t->Qd[9] = 0;
-    t->Qd[10] = 0;
-    t->Qd[19] = 0;
-    t->Qd[20] = 0;
-    t->Qd[28] = 0;
-    t->Qd[29] = 0;
-    t->Qd[36] = 0;
-    t->Qd[37] = 0;
-    t->Qd[43] = 0;
-    t->Qd[44] = 0;
-    t->Qd[49] = 0;
-    t->Qd[50] = 0;
-    t->Qd[54] = 0;
-    t->Qd[55] = 0;
-    t->Qd[58] = 0;
-    t->Qd[59] = 0;
-    t->Qd[61] = 0;
-    t->Qd[62] = 0;
+    lane_pair_store(&t->Qd[9], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[19], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[28], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[36], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[43], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[49], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[54], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[58], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[61], lane_pair_of(0, 0));
 }
 
 GPS_PSEUDORANGE11_BLOCK gps_pseudorange11_scalar process_noise_row_0(gps_pseudorange11_transition

@@ -196,10 +196,9 @@ typedef struct {
 /* Scratch memory of discretize. */
 typedef struct {
     gps_pseudorange11_scalar term[2][GPS_PSEUDORANGE11_N_TERMS]; /* the Horner chain's odd levels
-            R_k (term[1]); the doubling's new values; S G */
+            R_k (term[1]) and F h (term[0], each entry twice); the doubling's new values; S G */
     gps_pseudorange11_scalar S[GPS_PSEUDORANGE11_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)!
             (and the even levels R_k): each block row's dense segment, then the diagonal rows */
-    gps_pseudorange11_scalar fh[GPS_PSEUDORANGE11_NNZ_F]; /* F h at the nonzeros of F */
     gps_pseudorange11_scalar row_sum[GPS_PSEUDORANGE11_N_STATES]; /* balancing: off-diagonal row
             sums of D^-1 |F| D */
     gps_pseudorange11_scalar col_sum[GPS_PSEUDORANGE11_N_STATES]; /* balancing: off-diagonal column

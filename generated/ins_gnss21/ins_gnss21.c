@@ -580,69 +580,93 @@ static const signed char balance_exponent[INS_GNSS21_N_STATES] = { 15, 15, 10, 3
    power of two.  A plan on it that needs a doubling is retaken on rebalanced_norm. */
 static ins_gnss21_scalar balanced_norm(const ins_gnss21_matrices *restrict m)
 {
-    ins_gnss21_scalar v, norm = 0.0;
-    v = fabs(m->F[0]) + fabs(m->F[1]) * 0.03125 + fabs(m->F[2]) * 0.000244140625;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[3]) + fabs(m->F[4]) * 0.03125 + fabs(m->F[5]) * 0.000244140625;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[6]) * 32.0 + fabs(m->F[7]) * 32.0 + fabs(m->F[8]) * 0.001953125;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[9]) + fabs(m->F[10]) * 0.25 + fabs(m->F[11]) * 0.0001220703125 + fabs(m->F[12]) *
-            0.00048828125 + fabs(m->F[13]) * 1.1368683772161603e-13 + fabs(m->F[14]) *
-            1.1368683772161603e-13 + fabs(m->F[15]) * 1.1368683772161603e-13 + fabs(m->F[16]) *
-            1.1368683772161603e-13 + fabs(m->F[17]) * 1.1368683772161603e-13 + fabs(m->F[18]) *
-            1.1368683772161603e-13;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[19]) + fabs(m->F[20]) * 0.25 + fabs(m->F[21]) * 0.0001220703125 + fabs(m->F[22]) *
-            0.00048828125 + fabs(m->F[23]) * 1.1368683772161603e-13 + fabs(m->F[24]) *
-            1.1368683772161603e-13 + fabs(m->F[25]) * 1.1368683772161603e-13 + fabs(m->F[26]) *
-            1.1368683772161603e-13 + fabs(m->F[27]) * 1.1368683772161603e-13 + fabs(m->F[28]) *
-            1.1368683772161603e-13;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[29]) * 512.0 + fabs(m->F[30]) * 4.0 + fabs(m->F[31]) * 4.0 + fabs(m->F[32]) *
-            0.00048828125 + fabs(m->F[33]) * 0.00048828125 + fabs(m->F[34]) * 4.547473508864641e-13
-            + fabs(m->F[35]) * 4.547473508864641e-13 + fabs(m->F[36]) * 4.547473508864641e-13 +
-            fabs(m->F[37]) * 4.547473508864641e-13 + fabs(m->F[38]) * 4.547473508864641e-13 +
-            fabs(m->F[39]) * 4.547473508864641e-13;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[40]) * 8192.0 + fabs(m->F[41]) + fabs(m->F[42]) * 4.0 + fabs(m->F[43]) *
-            9.313225746154785e-10 + fabs(m->F[44]) * 9.313225746154785e-10 + fabs(m->F[45]) *
-            9.313225746154785e-10 + fabs(m->F[46]) * 9.313225746154785e-10 + fabs(m->F[47]) *
-            9.313225746154785e-10 + fabs(m->F[48]) * 9.313225746154785e-10;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[49]) * 8192.0 + fabs(m->F[50]) + fabs(m->F[51]) * 4.0 + fabs(m->F[52]) *
-            9.313225746154785e-10 + fabs(m->F[53]) * 9.313225746154785e-10 + fabs(m->F[54]) *
-            9.313225746154785e-10 + fabs(m->F[55]) * 9.313225746154785e-10 + fabs(m->F[56]) *
-            9.313225746154785e-10 + fabs(m->F[57]) * 9.313225746154785e-10;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[58]) * 2048.0 + fabs(m->F[59]) * 0.25 + fabs(m->F[60]) * 0.25 + fabs(m->F[61]) *
-            2.3283064365386963e-10 + fabs(m->F[62]) * 2.3283064365386963e-10 + fabs(m->F[63]) *
-            2.3283064365386963e-10 + fabs(m->F[64]) * 2.3283064365386963e-10 + fabs(m->F[65]) *
-            2.3283064365386963e-10 + fabs(m->F[66]) * 2.3283064365386963e-10;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[67]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[68]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[69]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[70]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[71]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[72]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[73]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[74]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[75]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[76]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[77]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[78]);
+    ins_gnss21_scalar norm = 0.0;
+    lane_pair lanes;
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[29]), fabs(m->F[9])), lane_pair_of(512.0,
+            1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[30]), fabs(m->F[10])),
+            lane_pair_of(4.0, 0.25));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[31]), fabs(m->F[11])),
+            lane_pair_of(4.0, 0.0001220703125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[32]), fabs(m->F[12])),
+            lane_pair_of(0.00048828125, 0.00048828125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[33]), fabs(m->F[13])),
+            lane_pair_of(0.00048828125, 1.1368683772161603e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[34]), fabs(m->F[14])),
+            lane_pair_of(4.547473508864641e-13, 1.1368683772161603e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[35]), fabs(m->F[15])),
+            lane_pair_of(4.547473508864641e-13, 1.1368683772161603e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[36]), fabs(m->F[16])),
+            lane_pair_of(4.547473508864641e-13, 1.1368683772161603e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[37]), fabs(m->F[17])),
+            lane_pair_of(4.547473508864641e-13, 1.1368683772161603e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[38]), fabs(m->F[18])),
+            lane_pair_of(4.547473508864641e-13, 1.1368683772161603e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[39]), 0.0),
+            lane_pair_of(4.547473508864641e-13, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[19]), fabs(m->F[40])), lane_pair_of(1.0,
+            8192.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[20]), fabs(m->F[41])),
+            lane_pair_of(0.25, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[21]), fabs(m->F[42])),
+            lane_pair_of(0.0001220703125, 4.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[22]), fabs(m->F[43])),
+            lane_pair_of(0.00048828125, 9.313225746154785e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[23]), fabs(m->F[44])),
+            lane_pair_of(1.1368683772161603e-13, 9.313225746154785e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[24]), fabs(m->F[45])),
+            lane_pair_of(1.1368683772161603e-13, 9.313225746154785e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[25]), fabs(m->F[46])),
+            lane_pair_of(1.1368683772161603e-13, 9.313225746154785e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[26]), fabs(m->F[47])),
+            lane_pair_of(1.1368683772161603e-13, 9.313225746154785e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[27]), fabs(m->F[48])),
+            lane_pair_of(1.1368683772161603e-13, 9.313225746154785e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[28]), 0.0),
+            lane_pair_of(1.1368683772161603e-13, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[49]), fabs(m->F[58])), lane_pair_of(8192.0,
+            2048.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[50]), fabs(m->F[59])),
+            lane_pair_of(1.0, 0.25));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[51]), fabs(m->F[60])),
+            lane_pair_of(4.0, 0.25));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[52]), fabs(m->F[61])),
+            lane_pair_of(9.313225746154785e-10, 2.3283064365386963e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[53]), fabs(m->F[62])),
+            lane_pair_of(9.313225746154785e-10, 2.3283064365386963e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[54]), fabs(m->F[63])),
+            lane_pair_of(9.313225746154785e-10, 2.3283064365386963e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[55]), fabs(m->F[64])),
+            lane_pair_of(9.313225746154785e-10, 2.3283064365386963e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[56]), fabs(m->F[65])),
+            lane_pair_of(9.313225746154785e-10, 2.3283064365386963e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[57]), fabs(m->F[66])),
+            lane_pair_of(9.313225746154785e-10, 2.3283064365386963e-10));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[0]), fabs(m->F[3]));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[1]), fabs(m->F[4])),
+            lane_pair_of(0.03125, 0.03125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[2]), fabs(m->F[5])),
+            lane_pair_of(0.000244140625, 0.000244140625));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[6]), fabs(m->F[67])), lane_pair_of(32.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[7]), 0.0), lane_pair_of(32.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[8]), 0.0), lane_pair_of(0.001953125,
+            1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[68]), fabs(m->F[69]));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[70]), fabs(m->F[71]));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[72]), fabs(m->F[73]));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[74]), fabs(m->F[75]));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[76]), fabs(m->F[77]));
+    norm = lane_pair_max(lanes, norm);
+    const ins_gnss21_scalar v = fabs(m->F[78]);
     norm = v > norm ? v : norm;
     return norm;
 }
@@ -653,8 +677,11 @@ static ins_gnss21_scalar balanced_norm(const ins_gnss21_matrices *restrict m)
            balancing
    in powers of two, starting from the fixed D (at the check operating point one sweep finds it a
            fixed
-   point) and stopped at a fixed point; the sums in the reference's order (row by row). */
-static ins_gnss21_scalar rebalanced_norm(const ins_gnss21_matrices *restrict m,
+   point) and stopped at a fixed point; the sums in the reference's order (row by row).
+   Not inlined: it runs only when a doubling is at stake, and inlined, gcc -O2 would keep
+   balanced_norm's |F_ij| on the stack for it on every call (bench/bench_cycle.py: 130
+   instructions at 18 states). */
+INS_GNSS21_BLOCK ins_gnss21_scalar rebalanced_norm(const ins_gnss21_matrices *restrict m,
         ins_gnss21_discretize_scratch *restrict w)
 {
     ins_gnss21_scalar v, norm = 0.0;
@@ -1093,742 +1120,1006 @@ static int taylor_plan(const ins_gnss21_scalar norm, const ins_gnss21_scalar T, 
 INS_GNSS21_BLOCK void horner_input(const ins_gnss21_matrices *restrict m,
         ins_gnss21_discretize_scratch *restrict w, const ins_gnss21_scalar h)
 {
-    w->fh[0] = m->F[0]*h;
-    w->fh[1] = m->F[1]*h;
-    w->fh[2] = m->F[2]*h;
-    w->fh[3] = m->F[3]*h;
-    w->fh[4] = m->F[4]*h;
-    w->fh[5] = m->F[5]*h;
-    w->fh[6] = m->F[6]*h;
-    w->fh[7] = m->F[7]*h;
-    w->fh[8] = m->F[8]*h;
-    w->fh[9] = m->F[9]*h;
-    w->fh[10] = m->F[10]*h;
-    w->fh[11] = m->F[11]*h;
-    w->fh[12] = m->F[12]*h;
-    w->fh[13] = m->F[13]*h;
-    w->fh[14] = m->F[14]*h;
-    w->fh[15] = m->F[15]*h;
-    w->fh[16] = m->F[16]*h;
-    w->fh[17] = m->F[17]*h;
-    w->fh[18] = m->F[18]*h;
-    w->fh[19] = m->F[19]*h;
-    w->fh[20] = m->F[20]*h;
-    w->fh[21] = m->F[21]*h;
-    w->fh[22] = m->F[22]*h;
-    w->fh[23] = m->F[23]*h;
-    w->fh[24] = m->F[24]*h;
-    w->fh[25] = m->F[25]*h;
-    w->fh[26] = m->F[26]*h;
-    w->fh[27] = m->F[27]*h;
-    w->fh[28] = m->F[28]*h;
-    w->fh[29] = m->F[29]*h;
-    w->fh[30] = m->F[30]*h;
-    w->fh[31] = m->F[31]*h;
-    w->fh[32] = m->F[32]*h;
-    w->fh[33] = m->F[33]*h;
-    w->fh[34] = m->F[34]*h;
-    w->fh[35] = m->F[35]*h;
-    w->fh[36] = m->F[36]*h;
-    w->fh[37] = m->F[37]*h;
-    w->fh[38] = m->F[38]*h;
-    w->fh[39] = m->F[39]*h;
-    w->fh[40] = m->F[40]*h;
-    w->fh[41] = m->F[41]*h;
-    w->fh[42] = m->F[42]*h;
-    w->fh[43] = m->F[43]*h;
-    w->fh[44] = m->F[44]*h;
-    w->fh[45] = m->F[45]*h;
-    w->fh[46] = m->F[46]*h;
-    w->fh[47] = m->F[47]*h;
-    w->fh[48] = m->F[48]*h;
-    w->fh[49] = m->F[49]*h;
-    w->fh[50] = m->F[50]*h;
-    w->fh[51] = m->F[51]*h;
-    w->fh[52] = m->F[52]*h;
-    w->fh[53] = m->F[53]*h;
-    w->fh[54] = m->F[54]*h;
-    w->fh[55] = m->F[55]*h;
-    w->fh[56] = m->F[56]*h;
-    w->fh[57] = m->F[57]*h;
-    w->fh[58] = m->F[58]*h;
-    w->fh[59] = m->F[59]*h;
-    w->fh[60] = m->F[60]*h;
-    w->fh[61] = m->F[61]*h;
-    w->fh[62] = m->F[62]*h;
-    w->fh[63] = m->F[63]*h;
-    w->fh[64] = m->F[64]*h;
-    w->fh[65] = m->F[65]*h;
-    w->fh[66] = m->F[66]*h;
-    w->fh[67] = m->F[67]*h;
-    w->fh[68] = m->F[68]*h;
-    w->fh[69] = m->F[69]*h;
-    w->fh[70] = m->F[70]*h;
-    w->fh[71] = m->F[71]*h;
-    w->fh[72] = m->F[72]*h;
-    w->fh[73] = m->F[73]*h;
-    w->fh[74] = m->F[74]*h;
-    w->fh[75] = m->F[75]*h;
-    w->fh[76] = m->F[76]*h;
-    w->fh[77] = m->F[77]*h;
-    w->fh[78] = m->F[78]*h;
+    ins_gnss21_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
+    lane_pair_store(&fh_pairs[0], lane_pair_of(m->F[0]*h, m->F[0]*h));
+    lane_pair_store(&fh_pairs[2], lane_pair_of(m->F[1]*h, m->F[1]*h));
+    lane_pair_store(&fh_pairs[4], lane_pair_of(m->F[2]*h, m->F[2]*h));
+    lane_pair_store(&fh_pairs[6], lane_pair_of(m->F[3]*h, m->F[3]*h));
+    lane_pair_store(&fh_pairs[8], lane_pair_of(m->F[4]*h, m->F[4]*h));
+    lane_pair_store(&fh_pairs[10], lane_pair_of(m->F[5]*h, m->F[5]*h));
+    lane_pair_store(&fh_pairs[12], lane_pair_of(m->F[6]*h, m->F[6]*h));
+    lane_pair_store(&fh_pairs[14], lane_pair_of(m->F[7]*h, m->F[7]*h));
+    lane_pair_store(&fh_pairs[16], lane_pair_of(m->F[8]*h, m->F[8]*h));
+    lane_pair_store(&fh_pairs[18], lane_pair_of(m->F[9]*h, m->F[9]*h));
+    lane_pair_store(&fh_pairs[20], lane_pair_of(m->F[10]*h, m->F[10]*h));
+    lane_pair_store(&fh_pairs[22], lane_pair_of(m->F[11]*h, m->F[11]*h));
+    lane_pair_store(&fh_pairs[24], lane_pair_of(m->F[12]*h, m->F[12]*h));
+    lane_pair_store(&fh_pairs[26], lane_pair_of(m->F[13]*h, m->F[13]*h));
+    lane_pair_store(&fh_pairs[28], lane_pair_of(m->F[14]*h, m->F[14]*h));
+    lane_pair_store(&fh_pairs[30], lane_pair_of(m->F[15]*h, m->F[15]*h));
+    lane_pair_store(&fh_pairs[32], lane_pair_of(m->F[16]*h, m->F[16]*h));
+    lane_pair_store(&fh_pairs[34], lane_pair_of(m->F[17]*h, m->F[17]*h));
+    lane_pair_store(&fh_pairs[36], lane_pair_of(m->F[18]*h, m->F[18]*h));
+    lane_pair_store(&fh_pairs[38], lane_pair_of(m->F[19]*h, m->F[19]*h));
+    lane_pair_store(&fh_pairs[40], lane_pair_of(m->F[20]*h, m->F[20]*h));
+    lane_pair_store(&fh_pairs[42], lane_pair_of(m->F[21]*h, m->F[21]*h));
+    lane_pair_store(&fh_pairs[44], lane_pair_of(m->F[22]*h, m->F[22]*h));
+    lane_pair_store(&fh_pairs[46], lane_pair_of(m->F[23]*h, m->F[23]*h));
+    lane_pair_store(&fh_pairs[48], lane_pair_of(m->F[24]*h, m->F[24]*h));
+    lane_pair_store(&fh_pairs[50], lane_pair_of(m->F[25]*h, m->F[25]*h));
+    lane_pair_store(&fh_pairs[52], lane_pair_of(m->F[26]*h, m->F[26]*h));
+    lane_pair_store(&fh_pairs[54], lane_pair_of(m->F[27]*h, m->F[27]*h));
+    lane_pair_store(&fh_pairs[56], lane_pair_of(m->F[28]*h, m->F[28]*h));
+    lane_pair_store(&fh_pairs[58], lane_pair_of(m->F[29]*h, m->F[29]*h));
+    lane_pair_store(&fh_pairs[60], lane_pair_of(m->F[30]*h, m->F[30]*h));
+    lane_pair_store(&fh_pairs[62], lane_pair_of(m->F[31]*h, m->F[31]*h));
+    lane_pair_store(&fh_pairs[64], lane_pair_of(m->F[32]*h, m->F[32]*h));
+    lane_pair_store(&fh_pairs[66], lane_pair_of(m->F[33]*h, m->F[33]*h));
+    lane_pair_store(&fh_pairs[68], lane_pair_of(m->F[34]*h, m->F[34]*h));
+    lane_pair_store(&fh_pairs[70], lane_pair_of(m->F[35]*h, m->F[35]*h));
+    lane_pair_store(&fh_pairs[72], lane_pair_of(m->F[36]*h, m->F[36]*h));
+    lane_pair_store(&fh_pairs[74], lane_pair_of(m->F[37]*h, m->F[37]*h));
+    lane_pair_store(&fh_pairs[76], lane_pair_of(m->F[38]*h, m->F[38]*h));
+    lane_pair_store(&fh_pairs[78], lane_pair_of(m->F[39]*h, m->F[39]*h));
+    lane_pair_store(&fh_pairs[80], lane_pair_of(m->F[40]*h, m->F[40]*h));
+    lane_pair_store(&fh_pairs[82], lane_pair_of(m->F[41]*h, m->F[41]*h));
+    lane_pair_store(&fh_pairs[84], lane_pair_of(m->F[42]*h, m->F[42]*h));
+    lane_pair_store(&fh_pairs[86], lane_pair_of(m->F[43]*h, m->F[43]*h));
+    lane_pair_store(&fh_pairs[88], lane_pair_of(m->F[44]*h, m->F[44]*h));
+    lane_pair_store(&fh_pairs[90], lane_pair_of(m->F[45]*h, m->F[45]*h));
+    lane_pair_store(&fh_pairs[92], lane_pair_of(m->F[46]*h, m->F[46]*h));
+    lane_pair_store(&fh_pairs[94], lane_pair_of(m->F[47]*h, m->F[47]*h));
+    lane_pair_store(&fh_pairs[96], lane_pair_of(m->F[48]*h, m->F[48]*h));
+    lane_pair_store(&fh_pairs[98], lane_pair_of(m->F[49]*h, m->F[49]*h));
+    lane_pair_store(&fh_pairs[100], lane_pair_of(m->F[50]*h, m->F[50]*h));
+    lane_pair_store(&fh_pairs[102], lane_pair_of(m->F[51]*h, m->F[51]*h));
+    lane_pair_store(&fh_pairs[104], lane_pair_of(m->F[52]*h, m->F[52]*h));
+    lane_pair_store(&fh_pairs[106], lane_pair_of(m->F[53]*h, m->F[53]*h));
+    lane_pair_store(&fh_pairs[108], lane_pair_of(m->F[54]*h, m->F[54]*h));
+    lane_pair_store(&fh_pairs[110], lane_pair_of(m->F[55]*h, m->F[55]*h));
+    lane_pair_store(&fh_pairs[112], lane_pair_of(m->F[56]*h, m->F[56]*h));
+    lane_pair_store(&fh_pairs[114], lane_pair_of(m->F[57]*h, m->F[57]*h));
+    lane_pair_store(&fh_pairs[116], lane_pair_of(m->F[58]*h, m->F[58]*h));
+    lane_pair_store(&fh_pairs[118], lane_pair_of(m->F[59]*h, m->F[59]*h));
+    lane_pair_store(&fh_pairs[120], lane_pair_of(m->F[60]*h, m->F[60]*h));
+    lane_pair_store(&fh_pairs[122], lane_pair_of(m->F[61]*h, m->F[61]*h));
+    lane_pair_store(&fh_pairs[124], lane_pair_of(m->F[62]*h, m->F[62]*h));
+    lane_pair_store(&fh_pairs[126], lane_pair_of(m->F[63]*h, m->F[63]*h));
+    lane_pair_store(&fh_pairs[128], lane_pair_of(m->F[64]*h, m->F[64]*h));
+    lane_pair_store(&fh_pairs[130], lane_pair_of(m->F[65]*h, m->F[65]*h));
+    lane_pair_store(&fh_pairs[132], lane_pair_of(m->F[66]*h, m->F[66]*h));
+    lane_pair_store(&fh_pairs[134], lane_pair_of(m->F[67]*h, m->F[67]*h));
+    lane_pair_store(&fh_pairs[136], lane_pair_of(m->F[68]*h, m->F[68]*h));
+    lane_pair_store(&fh_pairs[138], lane_pair_of(m->F[69]*h, m->F[69]*h));
+    lane_pair_store(&fh_pairs[140], lane_pair_of(m->F[70]*h, m->F[70]*h));
+    lane_pair_store(&fh_pairs[142], lane_pair_of(m->F[71]*h, m->F[71]*h));
+    lane_pair_store(&fh_pairs[144], lane_pair_of(m->F[72]*h, m->F[72]*h));
+    lane_pair_store(&fh_pairs[146], lane_pair_of(m->F[73]*h, m->F[73]*h));
+    lane_pair_store(&fh_pairs[148], lane_pair_of(m->F[74]*h, m->F[74]*h));
+    lane_pair_store(&fh_pairs[150], lane_pair_of(m->F[75]*h, m->F[75]*h));
+    lane_pair_store(&fh_pairs[152], lane_pair_of(m->F[76]*h, m->F[76]*h));
+    lane_pair_store(&fh_pairs[154], lane_pair_of(m->F[77]*h, m->F[77]*h));
+    lane_pair_store(&fh_pairs[156], lane_pair_of(m->F[78]*h, m->F[78]*h));
 }
 
 INS_GNSS21_BLOCK void horner_level_1_into_S(ins_gnss21_discretize_scratch *restrict w, const
         ins_gnss21_scalar c_out, const ins_gnss21_scalar c_in)
 {
+    const ins_gnss21_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     w->S[0] = c_out;
-    w->S[1] = w->fh[0]*c_in;
-    w->S[2] = w->fh[1]*c_in;
-    w->S[3] = w->fh[2]*c_in;
-    w->S[4] = 0;
-    w->S[5] = 0;
-    w->S[6] = 0;
-    w->S[7] = 0;
-    w->S[8] = 0;
-    w->S[9] = 0;
-    w->S[10] = 0;
-    w->S[11] = 0;
-    w->S[12] = 0;
-    w->S[13] = 0;
-    w->S[14] = 0;
-    w->S[15] = 0;
-    w->S[16] = 0;
-    w->S[17] = 0;
-    w->S[18] = 0;
-    w->S[19] = 0;
-    w->S[20] = 0;
-    w->S[21] = 0;
-    w->S[22] = w->fh[3]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[0], fh_pairs[2]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[1], pair);
+    }
+    w->S[3] = fh_pairs[4]*c_in;
+    lane_pair_store(&w->S[4], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[6], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[8], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[10], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[12], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[14], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[16], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[18], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[20], lane_pair_of(0, 0));
+    w->S[22] = fh_pairs[6]*c_in;
     w->S[23] = c_out;
-    w->S[24] = w->fh[4]*c_in;
+    w->S[24] = fh_pairs[8]*c_in;
     w->S[25] = 0;
-    w->S[26] = w->fh[5]*c_in;
-    w->S[27] = 0;
-    w->S[28] = 0;
-    w->S[29] = 0;
-    w->S[30] = 0;
-    w->S[31] = 0;
-    w->S[32] = 0;
-    w->S[33] = 0;
-    w->S[34] = 0;
-    w->S[35] = 0;
-    w->S[36] = 0;
-    w->S[37] = 0;
-    w->S[38] = 0;
-    w->S[39] = 0;
-    w->S[40] = 0;
-    w->S[41] = 0;
-    w->S[42] = 0;
+    w->S[26] = fh_pairs[10]*c_in;
+    lane_pair_store(&w->S[27], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[29], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[31], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[33], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[35], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[37], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[39], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[41], lane_pair_of(0, 0));
     w->S[43] = 0;
-    w->S[44] = w->fh[6]*c_in;
-    w->S[45] = w->fh[7]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[12], fh_pairs[14]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[44], pair);
+    }
     w->S[46] = c_out;
-    w->S[47] = 0;
-    w->S[48] = 0;
-    w->S[49] = w->fh[8]*c_in;
-    w->S[50] = 0;
-    w->S[51] = 0;
-    w->S[52] = 0;
-    w->S[53] = 0;
-    w->S[54] = 0;
-    w->S[55] = 0;
-    w->S[56] = 0;
-    w->S[57] = 0;
-    w->S[58] = 0;
-    w->S[59] = 0;
-    w->S[60] = 0;
-    w->S[61] = 0;
-    w->S[62] = 0;
-    w->S[63] = 0;
-    w->S[64] = 0;
-    w->S[65] = 0;
-    w->S[66] = 0;
-    w->S[67] = 0;
+    lane_pair_store(&w->S[47], lane_pair_of(0, 0));
+    w->S[49] = fh_pairs[16]*c_in;
+    lane_pair_store(&w->S[50], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[52], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[54], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[56], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[58], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[60], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[62], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[64], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[66], lane_pair_of(0, 0));
     w->S[68] = 0;
     w->S[69] = c_out;
-    w->S[70] = w->fh[9]*c_in;
-    w->S[71] = w->fh[10]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[18], fh_pairs[20]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[70], pair);
+    }
     w->S[72] = 0;
-    w->S[73] = w->fh[11]*c_in;
-    w->S[74] = w->fh[12]*c_in;
-    w->S[75] = 0;
-    w->S[76] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[22], fh_pairs[24]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[73], pair);
+    }
+    lane_pair_store(&w->S[75], lane_pair_of(0, 0));
     w->S[77] = 0;
-    w->S[78] = w->fh[13]*c_in;
-    w->S[79] = w->fh[14]*c_in;
-    w->S[80] = w->fh[15]*c_in;
-    w->S[81] = 0;
-    w->S[82] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[26], fh_pairs[28]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[78], pair);
+    }
+    w->S[80] = fh_pairs[30]*c_in;
+    lane_pair_store(&w->S[81], lane_pair_of(0, 0));
     w->S[83] = 0;
-    w->S[84] = w->fh[16]*c_in;
-    w->S[85] = w->fh[17]*c_in;
-    w->S[86] = w->fh[18]*c_in;
-    w->S[87] = 0;
-    w->S[88] = 0;
-    w->S[89] = 0;
-    w->S[90] = 0;
-    w->S[91] = w->fh[19]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[32], fh_pairs[34]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[84], pair);
+    }
+    w->S[86] = fh_pairs[36]*c_in;
+    lane_pair_store(&w->S[87], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[89], lane_pair_of(0, 0));
+    w->S[91] = fh_pairs[38]*c_in;
     w->S[92] = c_out;
-    w->S[93] = w->fh[20]*c_in;
-    w->S[94] = w->fh[21]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[40], fh_pairs[42]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[93], pair);
+    }
     w->S[95] = 0;
-    w->S[96] = w->fh[22]*c_in;
-    w->S[97] = 0;
-    w->S[98] = 0;
+    w->S[96] = fh_pairs[44]*c_in;
+    lane_pair_store(&w->S[97], lane_pair_of(0, 0));
     w->S[99] = 0;
-    w->S[100] = w->fh[23]*c_in;
-    w->S[101] = w->fh[24]*c_in;
-    w->S[102] = w->fh[25]*c_in;
-    w->S[103] = 0;
-    w->S[104] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[46], fh_pairs[48]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[100], pair);
+    }
+    w->S[102] = fh_pairs[50]*c_in;
+    lane_pair_store(&w->S[103], lane_pair_of(0, 0));
     w->S[105] = 0;
-    w->S[106] = w->fh[26]*c_in;
-    w->S[107] = w->fh[27]*c_in;
-    w->S[108] = w->fh[28]*c_in;
-    w->S[109] = 0;
-    w->S[110] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[52], fh_pairs[54]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[106], pair);
+    }
+    w->S[108] = fh_pairs[56]*c_in;
+    lane_pair_store(&w->S[109], lane_pair_of(0, 0));
     w->S[111] = 0;
-    w->S[112] = w->fh[29]*c_in;
-    w->S[113] = w->fh[30]*c_in;
-    w->S[114] = w->fh[31]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[58], fh_pairs[60]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[112], pair);
+    }
+    w->S[114] = fh_pairs[62]*c_in;
     w->S[115] = c_out;
-    w->S[116] = w->fh[32]*c_in;
-    w->S[117] = w->fh[33]*c_in;
-    w->S[118] = 0;
-    w->S[119] = 0;
-    w->S[120] = 0;
-    w->S[121] = 0;
-    w->S[122] = w->fh[34]*c_in;
-    w->S[123] = w->fh[35]*c_in;
-    w->S[124] = w->fh[36]*c_in;
-    w->S[125] = 0;
-    w->S[126] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[64], fh_pairs[66]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[116], pair);
+    }
+    lane_pair_store(&w->S[118], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[120], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[68], fh_pairs[70]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[122], pair);
+    }
+    w->S[124] = fh_pairs[72]*c_in;
+    lane_pair_store(&w->S[125], lane_pair_of(0, 0));
     w->S[127] = 0;
-    w->S[128] = w->fh[37]*c_in;
-    w->S[129] = w->fh[38]*c_in;
-    w->S[130] = w->fh[39]*c_in;
-    w->S[131] = 0;
-    w->S[132] = 0;
-    w->S[133] = 0;
-    w->S[134] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[74], fh_pairs[76]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[128], pair);
+    }
+    w->S[130] = fh_pairs[78]*c_in;
+    lane_pair_store(&w->S[131], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[133], lane_pair_of(0, 0));
     w->S[135] = 0;
-    w->S[136] = w->fh[40]*c_in;
+    w->S[136] = fh_pairs[80]*c_in;
     w->S[137] = 0;
     w->S[138] = c_out;
-    w->S[139] = w->fh[41]*c_in;
-    w->S[140] = w->fh[42]*c_in;
-    w->S[141] = w->fh[43]*c_in;
-    w->S[142] = w->fh[44]*c_in;
-    w->S[143] = w->fh[45]*c_in;
-    w->S[144] = 0;
-    w->S[145] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[82], fh_pairs[84]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[139], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[86], fh_pairs[88]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[141], pair);
+    }
+    w->S[143] = fh_pairs[90]*c_in;
+    lane_pair_store(&w->S[144], lane_pair_of(0, 0));
     w->S[146] = 0;
-    w->S[147] = w->fh[46]*c_in;
-    w->S[148] = w->fh[47]*c_in;
-    w->S[149] = w->fh[48]*c_in;
-    w->S[150] = 0;
-    w->S[151] = 0;
-    w->S[152] = 0;
-    w->S[153] = 0;
-    w->S[154] = 0;
-    w->S[155] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[92], fh_pairs[94]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[147], pair);
+    }
+    w->S[149] = fh_pairs[96]*c_in;
+    lane_pair_store(&w->S[150], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[152], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[154], lane_pair_of(0, 0));
     w->S[156] = 0;
-    w->S[157] = w->fh[49]*c_in;
-    w->S[158] = 0;
-    w->S[159] = 0;
-    w->S[160] = w->fh[50]*c_in;
+    w->S[157] = fh_pairs[98]*c_in;
+    lane_pair_store(&w->S[158], lane_pair_of(0, 0));
+    w->S[160] = fh_pairs[100]*c_in;
     w->S[161] = c_out;
-    w->S[162] = w->fh[51]*c_in;
-    w->S[163] = w->fh[52]*c_in;
-    w->S[164] = w->fh[53]*c_in;
-    w->S[165] = w->fh[54]*c_in;
-    w->S[166] = 0;
-    w->S[167] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[102], fh_pairs[104]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[162], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[106], fh_pairs[108]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[164], pair);
+    }
+    lane_pair_store(&w->S[166], lane_pair_of(0, 0));
     w->S[168] = 0;
-    w->S[169] = w->fh[55]*c_in;
-    w->S[170] = w->fh[56]*c_in;
-    w->S[171] = w->fh[57]*c_in;
-    w->S[172] = 0;
-    w->S[173] = 0;
-    w->S[174] = 0;
-    w->S[175] = 0;
-    w->S[176] = 0;
-    w->S[177] = 0;
-    w->S[178] = 0;
-    w->S[179] = 0;
-    w->S[180] = w->fh[58]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[110], fh_pairs[112]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[169], pair);
+    }
+    w->S[171] = fh_pairs[114]*c_in;
+    lane_pair_store(&w->S[172], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[174], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[176], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[178], lane_pair_of(0, 0));
+    w->S[180] = fh_pairs[116]*c_in;
     w->S[181] = 0;
-    w->S[182] = w->fh[59]*c_in;
-    w->S[183] = w->fh[60]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[118], fh_pairs[120]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[182], pair);
+    }
     w->S[184] = c_out;
-    w->S[185] = w->fh[61]*c_in;
-    w->S[186] = w->fh[62]*c_in;
-    w->S[187] = w->fh[63]*c_in;
-    w->S[188] = 0;
-    w->S[189] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[122], fh_pairs[124]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[185], pair);
+    }
+    w->S[187] = fh_pairs[126]*c_in;
+    lane_pair_store(&w->S[188], lane_pair_of(0, 0));
     w->S[190] = 0;
-    w->S[191] = w->fh[64]*c_in;
-    w->S[192] = w->fh[65]*c_in;
-    w->S[193] = w->fh[66]*c_in;
-    w->S[194] = 0;
-    w->S[195] = 0;
-    w->S[196] = 0;
-    w->S[197] = 0;
-    w->S[198] = c_out + w->fh[67]*c_in;
-    w->S[199] = c_out + w->fh[68]*c_in;
-    w->S[200] = c_out + w->fh[69]*c_in;
-    w->S[201] = c_out + w->fh[70]*c_in;
-    w->S[202] = c_out + w->fh[71]*c_in;
-    w->S[203] = c_out + w->fh[72]*c_in;
-    w->S[204] = c_out + w->fh[73]*c_in;
-    w->S[205] = c_out + w->fh[74]*c_in;
-    w->S[206] = c_out + w->fh[75]*c_in;
-    w->S[207] = c_out + w->fh[76]*c_in;
-    w->S[208] = c_out + w->fh[77]*c_in;
-    w->S[209] = c_out + w->fh[78]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[128], fh_pairs[130]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[191], pair);
+    }
+    w->S[193] = fh_pairs[132]*c_in;
+    lane_pair_store(&w->S[194], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[196], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[134], fh_pairs[136]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[198], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[138], fh_pairs[140]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[200], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[142], fh_pairs[144]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[202], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[146], fh_pairs[148]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[204], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[150], fh_pairs[152]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[206], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[154], fh_pairs[156]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[208], pair);
+    }
 }
 
 INS_GNSS21_BLOCK void horner_level_1_into_term(ins_gnss21_discretize_scratch *restrict w, const
         ins_gnss21_scalar c_out, const ins_gnss21_scalar c_in)
 {
+    const ins_gnss21_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     w->term[1][0] = c_out;
-    w->term[1][1] = w->fh[0]*c_in;
-    w->term[1][2] = w->fh[1]*c_in;
-    w->term[1][3] = w->fh[2]*c_in;
-    w->term[1][4] = 0;
-    w->term[1][5] = 0;
-    w->term[1][6] = 0;
-    w->term[1][7] = 0;
-    w->term[1][8] = 0;
-    w->term[1][9] = 0;
-    w->term[1][10] = 0;
-    w->term[1][11] = 0;
-    w->term[1][12] = 0;
-    w->term[1][13] = 0;
-    w->term[1][14] = 0;
-    w->term[1][15] = 0;
-    w->term[1][16] = 0;
-    w->term[1][17] = 0;
-    w->term[1][18] = 0;
-    w->term[1][19] = 0;
-    w->term[1][20] = 0;
-    w->term[1][21] = 0;
-    w->term[1][22] = w->fh[3]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[0], fh_pairs[2]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][1], pair);
+    }
+    w->term[1][3] = fh_pairs[4]*c_in;
+    lane_pair_store(&w->term[1][4], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][6], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][8], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][10], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][12], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][14], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][16], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][18], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][20], lane_pair_of(0, 0));
+    w->term[1][22] = fh_pairs[6]*c_in;
     w->term[1][23] = c_out;
-    w->term[1][24] = w->fh[4]*c_in;
+    w->term[1][24] = fh_pairs[8]*c_in;
     w->term[1][25] = 0;
-    w->term[1][26] = w->fh[5]*c_in;
-    w->term[1][27] = 0;
-    w->term[1][28] = 0;
-    w->term[1][29] = 0;
-    w->term[1][30] = 0;
-    w->term[1][31] = 0;
-    w->term[1][32] = 0;
-    w->term[1][33] = 0;
-    w->term[1][34] = 0;
-    w->term[1][35] = 0;
-    w->term[1][36] = 0;
-    w->term[1][37] = 0;
-    w->term[1][38] = 0;
-    w->term[1][39] = 0;
-    w->term[1][40] = 0;
-    w->term[1][41] = 0;
-    w->term[1][42] = 0;
+    w->term[1][26] = fh_pairs[10]*c_in;
+    lane_pair_store(&w->term[1][27], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][29], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][31], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][33], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][35], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][37], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][39], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][41], lane_pair_of(0, 0));
     w->term[1][43] = 0;
-    w->term[1][44] = w->fh[6]*c_in;
-    w->term[1][45] = w->fh[7]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[12], fh_pairs[14]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][44], pair);
+    }
     w->term[1][46] = c_out;
-    w->term[1][47] = 0;
-    w->term[1][48] = 0;
-    w->term[1][49] = w->fh[8]*c_in;
-    w->term[1][50] = 0;
-    w->term[1][51] = 0;
-    w->term[1][52] = 0;
-    w->term[1][53] = 0;
-    w->term[1][54] = 0;
-    w->term[1][55] = 0;
-    w->term[1][56] = 0;
-    w->term[1][57] = 0;
-    w->term[1][58] = 0;
-    w->term[1][59] = 0;
-    w->term[1][60] = 0;
-    w->term[1][61] = 0;
-    w->term[1][62] = 0;
-    w->term[1][63] = 0;
-    w->term[1][64] = 0;
-    w->term[1][65] = 0;
-    w->term[1][66] = 0;
-    w->term[1][67] = 0;
+    lane_pair_store(&w->term[1][47], lane_pair_of(0, 0));
+    w->term[1][49] = fh_pairs[16]*c_in;
+    lane_pair_store(&w->term[1][50], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][52], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][54], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][56], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][58], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][60], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][62], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][64], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][66], lane_pair_of(0, 0));
     w->term[1][68] = 0;
     w->term[1][69] = c_out;
-    w->term[1][70] = w->fh[9]*c_in;
-    w->term[1][71] = w->fh[10]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[18], fh_pairs[20]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][70], pair);
+    }
     w->term[1][72] = 0;
-    w->term[1][73] = w->fh[11]*c_in;
-    w->term[1][74] = w->fh[12]*c_in;
-    w->term[1][75] = 0;
-    w->term[1][76] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[22], fh_pairs[24]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][73], pair);
+    }
+    lane_pair_store(&w->term[1][75], lane_pair_of(0, 0));
     w->term[1][77] = 0;
-    w->term[1][78] = w->fh[13]*c_in;
-    w->term[1][79] = w->fh[14]*c_in;
-    w->term[1][80] = w->fh[15]*c_in;
-    w->term[1][81] = 0;
-    w->term[1][82] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[26], fh_pairs[28]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][78], pair);
+    }
+    w->term[1][80] = fh_pairs[30]*c_in;
+    lane_pair_store(&w->term[1][81], lane_pair_of(0, 0));
     w->term[1][83] = 0;
-    w->term[1][84] = w->fh[16]*c_in;
-    w->term[1][85] = w->fh[17]*c_in;
-    w->term[1][86] = w->fh[18]*c_in;
-    w->term[1][87] = 0;
-    w->term[1][88] = 0;
-    w->term[1][89] = 0;
-    w->term[1][90] = 0;
-    w->term[1][91] = w->fh[19]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[32], fh_pairs[34]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][84], pair);
+    }
+    w->term[1][86] = fh_pairs[36]*c_in;
+    lane_pair_store(&w->term[1][87], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][89], lane_pair_of(0, 0));
+    w->term[1][91] = fh_pairs[38]*c_in;
     w->term[1][92] = c_out;
-    w->term[1][93] = w->fh[20]*c_in;
-    w->term[1][94] = w->fh[21]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[40], fh_pairs[42]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][93], pair);
+    }
     w->term[1][95] = 0;
-    w->term[1][96] = w->fh[22]*c_in;
-    w->term[1][97] = 0;
-    w->term[1][98] = 0;
+    w->term[1][96] = fh_pairs[44]*c_in;
+    lane_pair_store(&w->term[1][97], lane_pair_of(0, 0));
     w->term[1][99] = 0;
-    w->term[1][100] = w->fh[23]*c_in;
-    w->term[1][101] = w->fh[24]*c_in;
-    w->term[1][102] = w->fh[25]*c_in;
-    w->term[1][103] = 0;
-    w->term[1][104] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[46], fh_pairs[48]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][100], pair);
+    }
+    w->term[1][102] = fh_pairs[50]*c_in;
+    lane_pair_store(&w->term[1][103], lane_pair_of(0, 0));
     w->term[1][105] = 0;
-    w->term[1][106] = w->fh[26]*c_in;
-    w->term[1][107] = w->fh[27]*c_in;
-    w->term[1][108] = w->fh[28]*c_in;
-    w->term[1][109] = 0;
-    w->term[1][110] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[52], fh_pairs[54]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][106], pair);
+    }
+    w->term[1][108] = fh_pairs[56]*c_in;
+    lane_pair_store(&w->term[1][109], lane_pair_of(0, 0));
     w->term[1][111] = 0;
-    w->term[1][112] = w->fh[29]*c_in;
-    w->term[1][113] = w->fh[30]*c_in;
-    w->term[1][114] = w->fh[31]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[58], fh_pairs[60]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][112], pair);
+    }
+    w->term[1][114] = fh_pairs[62]*c_in;
     w->term[1][115] = c_out;
-    w->term[1][116] = w->fh[32]*c_in;
-    w->term[1][117] = w->fh[33]*c_in;
-    w->term[1][118] = 0;
-    w->term[1][119] = 0;
-    w->term[1][120] = 0;
-    w->term[1][121] = 0;
-    w->term[1][122] = w->fh[34]*c_in;
-    w->term[1][123] = w->fh[35]*c_in;
-    w->term[1][124] = w->fh[36]*c_in;
-    w->term[1][125] = 0;
-    w->term[1][126] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[64], fh_pairs[66]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][116], pair);
+    }
+    lane_pair_store(&w->term[1][118], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][120], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[68], fh_pairs[70]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][122], pair);
+    }
+    w->term[1][124] = fh_pairs[72]*c_in;
+    lane_pair_store(&w->term[1][125], lane_pair_of(0, 0));
     w->term[1][127] = 0;
-    w->term[1][128] = w->fh[37]*c_in;
-    w->term[1][129] = w->fh[38]*c_in;
-    w->term[1][130] = w->fh[39]*c_in;
-    w->term[1][131] = 0;
-    w->term[1][132] = 0;
-    w->term[1][133] = 0;
-    w->term[1][134] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[74], fh_pairs[76]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][128], pair);
+    }
+    w->term[1][130] = fh_pairs[78]*c_in;
+    lane_pair_store(&w->term[1][131], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][133], lane_pair_of(0, 0));
     w->term[1][135] = 0;
-    w->term[1][136] = w->fh[40]*c_in;
+    w->term[1][136] = fh_pairs[80]*c_in;
     w->term[1][137] = 0;
     w->term[1][138] = c_out;
-    w->term[1][139] = w->fh[41]*c_in;
-    w->term[1][140] = w->fh[42]*c_in;
-    w->term[1][141] = w->fh[43]*c_in;
-    w->term[1][142] = w->fh[44]*c_in;
-    w->term[1][143] = w->fh[45]*c_in;
-    w->term[1][144] = 0;
-    w->term[1][145] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[82], fh_pairs[84]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][139], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[86], fh_pairs[88]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][141], pair);
+    }
+    w->term[1][143] = fh_pairs[90]*c_in;
+    lane_pair_store(&w->term[1][144], lane_pair_of(0, 0));
     w->term[1][146] = 0;
-    w->term[1][147] = w->fh[46]*c_in;
-    w->term[1][148] = w->fh[47]*c_in;
-    w->term[1][149] = w->fh[48]*c_in;
-    w->term[1][150] = 0;
-    w->term[1][151] = 0;
-    w->term[1][152] = 0;
-    w->term[1][153] = 0;
-    w->term[1][154] = 0;
-    w->term[1][155] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[92], fh_pairs[94]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][147], pair);
+    }
+    w->term[1][149] = fh_pairs[96]*c_in;
+    lane_pair_store(&w->term[1][150], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][152], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][154], lane_pair_of(0, 0));
     w->term[1][156] = 0;
-    w->term[1][157] = w->fh[49]*c_in;
-    w->term[1][158] = 0;
-    w->term[1][159] = 0;
-    w->term[1][160] = w->fh[50]*c_in;
+    w->term[1][157] = fh_pairs[98]*c_in;
+    lane_pair_store(&w->term[1][158], lane_pair_of(0, 0));
+    w->term[1][160] = fh_pairs[100]*c_in;
     w->term[1][161] = c_out;
-    w->term[1][162] = w->fh[51]*c_in;
-    w->term[1][163] = w->fh[52]*c_in;
-    w->term[1][164] = w->fh[53]*c_in;
-    w->term[1][165] = w->fh[54]*c_in;
-    w->term[1][166] = 0;
-    w->term[1][167] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[102], fh_pairs[104]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][162], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[106], fh_pairs[108]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][164], pair);
+    }
+    lane_pair_store(&w->term[1][166], lane_pair_of(0, 0));
     w->term[1][168] = 0;
-    w->term[1][169] = w->fh[55]*c_in;
-    w->term[1][170] = w->fh[56]*c_in;
-    w->term[1][171] = w->fh[57]*c_in;
-    w->term[1][172] = 0;
-    w->term[1][173] = 0;
-    w->term[1][174] = 0;
-    w->term[1][175] = 0;
-    w->term[1][176] = 0;
-    w->term[1][177] = 0;
-    w->term[1][178] = 0;
-    w->term[1][179] = 0;
-    w->term[1][180] = w->fh[58]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[110], fh_pairs[112]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][169], pair);
+    }
+    w->term[1][171] = fh_pairs[114]*c_in;
+    lane_pair_store(&w->term[1][172], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][174], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][176], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][178], lane_pair_of(0, 0));
+    w->term[1][180] = fh_pairs[116]*c_in;
     w->term[1][181] = 0;
-    w->term[1][182] = w->fh[59]*c_in;
-    w->term[1][183] = w->fh[60]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[118], fh_pairs[120]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][182], pair);
+    }
     w->term[1][184] = c_out;
-    w->term[1][185] = w->fh[61]*c_in;
-    w->term[1][186] = w->fh[62]*c_in;
-    w->term[1][187] = w->fh[63]*c_in;
-    w->term[1][188] = 0;
-    w->term[1][189] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[122], fh_pairs[124]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][185], pair);
+    }
+    w->term[1][187] = fh_pairs[126]*c_in;
+    lane_pair_store(&w->term[1][188], lane_pair_of(0, 0));
     w->term[1][190] = 0;
-    w->term[1][191] = w->fh[64]*c_in;
-    w->term[1][192] = w->fh[65]*c_in;
-    w->term[1][193] = w->fh[66]*c_in;
-    w->term[1][194] = 0;
-    w->term[1][195] = 0;
-    w->term[1][196] = 0;
-    w->term[1][197] = 0;
-    w->term[1][198] = c_out + w->fh[67]*c_in;
-    w->term[1][199] = c_out + w->fh[68]*c_in;
-    w->term[1][200] = c_out + w->fh[69]*c_in;
-    w->term[1][201] = c_out + w->fh[70]*c_in;
-    w->term[1][202] = c_out + w->fh[71]*c_in;
-    w->term[1][203] = c_out + w->fh[72]*c_in;
-    w->term[1][204] = c_out + w->fh[73]*c_in;
-    w->term[1][205] = c_out + w->fh[74]*c_in;
-    w->term[1][206] = c_out + w->fh[75]*c_in;
-    w->term[1][207] = c_out + w->fh[76]*c_in;
-    w->term[1][208] = c_out + w->fh[77]*c_in;
-    w->term[1][209] = c_out + w->fh[78]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[128], fh_pairs[130]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][191], pair);
+    }
+    w->term[1][193] = fh_pairs[132]*c_in;
+    lane_pair_store(&w->term[1][194], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][196], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[134], fh_pairs[136]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][198], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[138], fh_pairs[140]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][200], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[142], fh_pairs[144]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][202], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[146], fh_pairs[148]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][204], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[150], fh_pairs[152]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][206], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[154], fh_pairs[156]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][208], pair);
+    }
 }
 
 INS_GNSS21_BLOCK void horner_saturated_into_S(ins_gnss21_discretize_scratch *restrict w, const
         ins_gnss21_scalar c_out)
 {
+    const ins_gnss21_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 22; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][22+k] + w->fh[1]*w->term[1][44+k] + w->fh[2]*w->term[1][66+k];
-        w->S[22+k] = w->fh[3]*w->term[1][k] + w->fh[4]*w->term[1][44+k] + w->fh[5]*w->term[1][88+k];
-        w->S[44+k] = w->fh[6]*w->term[1][k] + w->fh[7]*w->term[1][22+k] +
-                w->fh[8]*w->term[1][110+k];
-        w->S[66+k] = w->fh[9]*w->term[1][88+k] + w->fh[10]*w->term[1][110+k] +
-                w->fh[11]*w->term[1][154+k] + w->fh[12]*w->term[1][176+k];
-        w->S[88+k] = w->fh[19]*w->term[1][66+k] + w->fh[20]*w->term[1][110+k] +
-                w->fh[21]*w->term[1][132+k] + w->fh[22]*w->term[1][176+k];
-        w->S[110+k] = w->fh[29]*w->term[1][44+k] + w->fh[30]*w->term[1][66+k] +
-                w->fh[31]*w->term[1][88+k] + w->fh[32]*w->term[1][132+k] +
-                w->fh[33]*w->term[1][154+k];
-        w->S[132+k] = w->fh[40]*w->term[1][88+k] + w->fh[41]*w->term[1][154+k] +
-                w->fh[42]*w->term[1][176+k];
-        w->S[154+k] = w->fh[49]*w->term[1][66+k] + w->fh[50]*w->term[1][132+k] +
-                w->fh[51]*w->term[1][176+k];
-        w->S[176+k] = w->fh[58]*w->term[1][88+k] + w->fh[59]*w->term[1][132+k] +
-                w->fh[60]*w->term[1][154+k];
+    for (k = 0; k < 22; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->term[1][22+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->term[1][44+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->term[1][66+k]));
+        lane_pair_store(&w->S[k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[8]),
+                lane_pair_load(&w->term[1][44+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[10]),
+                lane_pair_load(&w->term[1][88+k]));
+        lane_pair_store(&w->S[22+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[12]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[14]),
+                lane_pair_load(&w->term[1][22+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[16]),
+                lane_pair_load(&w->term[1][110+k]));
+        lane_pair_store(&w->S[44+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[18]),
+                lane_pair_load(&w->term[1][88+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->term[1][110+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->term[1][154+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->term[1][176+k]));
+        lane_pair_store(&w->S[66+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]),
+                lane_pair_load(&w->term[1][66+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->term[1][110+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->term[1][132+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->term[1][176+k]));
+        lane_pair_store(&w->S[88+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->term[1][44+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->term[1][66+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->term[1][88+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->term[1][132+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->term[1][154+k]));
+        lane_pair_store(&w->S[110+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->term[1][88+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[82]),
+                lane_pair_load(&w->term[1][154+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[84]),
+                lane_pair_load(&w->term[1][176+k]));
+        lane_pair_store(&w->S[132+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[98]),
+                lane_pair_load(&w->term[1][66+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[100]),
+                lane_pair_load(&w->term[1][132+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[102]),
+                lane_pair_load(&w->term[1][176+k]));
+        lane_pair_store(&w->S[154+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[116]),
+                lane_pair_load(&w->term[1][88+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[118]),
+                lane_pair_load(&w->term[1][132+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[120]),
+                lane_pair_load(&w->term[1][154+k]));
+        lane_pair_store(&w->S[176+k], lanes);
     }
     w->S[0] = w->S[0] + c_out;
     w->S[23] = w->S[23] + c_out;
     w->S[46] = w->S[46] + c_out;
     w->S[69] = w->S[69] + c_out;
-    w->S[78] = w->S[78] + w->fh[13]*w->term[1][201];
-    w->S[79] = w->S[79] + w->fh[14]*w->term[1][202];
-    w->S[80] = w->S[80] + w->fh[15]*w->term[1][203];
-    w->S[84] = w->S[84] + w->fh[16]*w->term[1][207];
-    w->S[85] = w->S[85] + w->fh[17]*w->term[1][208];
-    w->S[86] = w->S[86] + w->fh[18]*w->term[1][209];
+    w->S[78] = w->S[78] + fh_pairs[26]*w->term[1][201];
+    w->S[79] = w->S[79] + fh_pairs[28]*w->term[1][202];
+    w->S[80] = w->S[80] + fh_pairs[30]*w->term[1][203];
+    w->S[84] = w->S[84] + fh_pairs[32]*w->term[1][207];
+    w->S[85] = w->S[85] + fh_pairs[34]*w->term[1][208];
+    w->S[86] = w->S[86] + fh_pairs[36]*w->term[1][209];
     w->S[92] = w->S[92] + c_out;
-    w->S[100] = w->S[100] + w->fh[23]*w->term[1][201];
-    w->S[101] = w->S[101] + w->fh[24]*w->term[1][202];
-    w->S[102] = w->S[102] + w->fh[25]*w->term[1][203];
-    w->S[106] = w->S[106] + w->fh[26]*w->term[1][207];
-    w->S[107] = w->S[107] + w->fh[27]*w->term[1][208];
-    w->S[108] = w->S[108] + w->fh[28]*w->term[1][209];
+    w->S[100] = w->S[100] + fh_pairs[46]*w->term[1][201];
+    w->S[101] = w->S[101] + fh_pairs[48]*w->term[1][202];
+    w->S[102] = w->S[102] + fh_pairs[50]*w->term[1][203];
+    w->S[106] = w->S[106] + fh_pairs[52]*w->term[1][207];
+    w->S[107] = w->S[107] + fh_pairs[54]*w->term[1][208];
+    w->S[108] = w->S[108] + fh_pairs[56]*w->term[1][209];
     w->S[115] = w->S[115] + c_out;
-    w->S[122] = w->S[122] + w->fh[34]*w->term[1][201];
-    w->S[123] = w->S[123] + w->fh[35]*w->term[1][202];
-    w->S[124] = w->S[124] + w->fh[36]*w->term[1][203];
-    w->S[128] = w->S[128] + w->fh[37]*w->term[1][207];
-    w->S[129] = w->S[129] + w->fh[38]*w->term[1][208];
-    w->S[130] = w->S[130] + w->fh[39]*w->term[1][209];
+    w->S[122] = w->S[122] + fh_pairs[68]*w->term[1][201];
+    w->S[123] = w->S[123] + fh_pairs[70]*w->term[1][202];
+    w->S[124] = w->S[124] + fh_pairs[72]*w->term[1][203];
+    w->S[128] = w->S[128] + fh_pairs[74]*w->term[1][207];
+    w->S[129] = w->S[129] + fh_pairs[76]*w->term[1][208];
+    w->S[130] = w->S[130] + fh_pairs[78]*w->term[1][209];
     w->S[138] = w->S[138] + c_out;
-    w->S[141] = w->S[141] + w->fh[43]*w->term[1][198];
-    w->S[142] = w->S[142] + w->fh[44]*w->term[1][199];
-    w->S[143] = w->S[143] + w->fh[45]*w->term[1][200];
-    w->S[147] = w->S[147] + w->fh[46]*w->term[1][204];
-    w->S[148] = w->S[148] + w->fh[47]*w->term[1][205];
-    w->S[149] = w->S[149] + w->fh[48]*w->term[1][206];
+    w->S[141] = w->S[141] + fh_pairs[86]*w->term[1][198];
+    w->S[142] = w->S[142] + fh_pairs[88]*w->term[1][199];
+    w->S[143] = w->S[143] + fh_pairs[90]*w->term[1][200];
+    w->S[147] = w->S[147] + fh_pairs[92]*w->term[1][204];
+    w->S[148] = w->S[148] + fh_pairs[94]*w->term[1][205];
+    w->S[149] = w->S[149] + fh_pairs[96]*w->term[1][206];
     w->S[161] = w->S[161] + c_out;
-    w->S[163] = w->S[163] + w->fh[52]*w->term[1][198];
-    w->S[164] = w->S[164] + w->fh[53]*w->term[1][199];
-    w->S[165] = w->S[165] + w->fh[54]*w->term[1][200];
-    w->S[169] = w->S[169] + w->fh[55]*w->term[1][204];
-    w->S[170] = w->S[170] + w->fh[56]*w->term[1][205];
-    w->S[171] = w->S[171] + w->fh[57]*w->term[1][206];
+    w->S[163] = w->S[163] + fh_pairs[104]*w->term[1][198];
+    w->S[164] = w->S[164] + fh_pairs[106]*w->term[1][199];
+    w->S[165] = w->S[165] + fh_pairs[108]*w->term[1][200];
+    w->S[169] = w->S[169] + fh_pairs[110]*w->term[1][204];
+    w->S[170] = w->S[170] + fh_pairs[112]*w->term[1][205];
+    w->S[171] = w->S[171] + fh_pairs[114]*w->term[1][206];
     w->S[184] = w->S[184] + c_out;
-    w->S[185] = w->S[185] + w->fh[61]*w->term[1][198];
-    w->S[186] = w->S[186] + w->fh[62]*w->term[1][199];
-    w->S[187] = w->S[187] + w->fh[63]*w->term[1][200];
-    w->S[191] = w->S[191] + w->fh[64]*w->term[1][204];
-    w->S[192] = w->S[192] + w->fh[65]*w->term[1][205];
-    w->S[193] = w->S[193] + w->fh[66]*w->term[1][206];
-    w->S[198] = c_out + w->fh[67]*w->term[1][198];
-    w->S[199] = c_out + w->fh[68]*w->term[1][199];
-    w->S[200] = c_out + w->fh[69]*w->term[1][200];
-    w->S[201] = c_out + w->fh[70]*w->term[1][201];
-    w->S[202] = c_out + w->fh[71]*w->term[1][202];
-    w->S[203] = c_out + w->fh[72]*w->term[1][203];
-    w->S[204] = c_out + w->fh[73]*w->term[1][204];
-    w->S[205] = c_out + w->fh[74]*w->term[1][205];
-    w->S[206] = c_out + w->fh[75]*w->term[1][206];
-    w->S[207] = c_out + w->fh[76]*w->term[1][207];
-    w->S[208] = c_out + w->fh[77]*w->term[1][208];
-    w->S[209] = c_out + w->fh[78]*w->term[1][209];
+    w->S[185] = w->S[185] + fh_pairs[122]*w->term[1][198];
+    w->S[186] = w->S[186] + fh_pairs[124]*w->term[1][199];
+    w->S[187] = w->S[187] + fh_pairs[126]*w->term[1][200];
+    w->S[191] = w->S[191] + fh_pairs[128]*w->term[1][204];
+    w->S[192] = w->S[192] + fh_pairs[130]*w->term[1][205];
+    w->S[193] = w->S[193] + fh_pairs[132]*w->term[1][206];
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[134], fh_pairs[136]),
+                lane_pair_load(&w->term[1][198]));
+        lane_pair_store(&w->S[198], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[138], fh_pairs[140]),
+                lane_pair_load(&w->term[1][200]));
+        lane_pair_store(&w->S[200], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[142], fh_pairs[144]),
+                lane_pair_load(&w->term[1][202]));
+        lane_pair_store(&w->S[202], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[146], fh_pairs[148]),
+                lane_pair_load(&w->term[1][204]));
+        lane_pair_store(&w->S[204], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[150], fh_pairs[152]),
+                lane_pair_load(&w->term[1][206]));
+        lane_pair_store(&w->S[206], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[154], fh_pairs[156]),
+                lane_pair_load(&w->term[1][208]));
+        lane_pair_store(&w->S[208], pair);
+    }
 }
 
 INS_GNSS21_BLOCK void horner_saturated_into_term(ins_gnss21_discretize_scratch *restrict w, const
         ins_gnss21_scalar c_out)
 {
+    const ins_gnss21_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 22; ++k) {
-        w->term[1][k] = w->fh[0]*w->S[22+k] + w->fh[1]*w->S[44+k] + w->fh[2]*w->S[66+k];
-        w->term[1][22+k] = w->fh[3]*w->S[k] + w->fh[4]*w->S[44+k] + w->fh[5]*w->S[88+k];
-        w->term[1][44+k] = w->fh[6]*w->S[k] + w->fh[7]*w->S[22+k] + w->fh[8]*w->S[110+k];
-        w->term[1][66+k] = w->fh[9]*w->S[88+k] + w->fh[10]*w->S[110+k] + w->fh[11]*w->S[154+k] +
-                w->fh[12]*w->S[176+k];
-        w->term[1][88+k] = w->fh[19]*w->S[66+k] + w->fh[20]*w->S[110+k] + w->fh[21]*w->S[132+k] +
-                w->fh[22]*w->S[176+k];
-        w->term[1][110+k] = w->fh[29]*w->S[44+k] + w->fh[30]*w->S[66+k] + w->fh[31]*w->S[88+k] +
-                w->fh[32]*w->S[132+k] + w->fh[33]*w->S[154+k];
-        w->term[1][132+k] = w->fh[40]*w->S[88+k] + w->fh[41]*w->S[154+k] + w->fh[42]*w->S[176+k];
-        w->term[1][154+k] = w->fh[49]*w->S[66+k] + w->fh[50]*w->S[132+k] + w->fh[51]*w->S[176+k];
-        w->term[1][176+k] = w->fh[58]*w->S[88+k] + w->fh[59]*w->S[132+k] + w->fh[60]*w->S[154+k];
+    for (k = 0; k < 22; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->S[22+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[44+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[66+k]));
+        lane_pair_store(&w->term[1][k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[6]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[8]),
+                lane_pair_load(&w->S[44+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[10]),
+                lane_pair_load(&w->S[88+k]));
+        lane_pair_store(&w->term[1][22+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[12]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[14]),
+                lane_pair_load(&w->S[22+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[16]),
+                lane_pair_load(&w->S[110+k]));
+        lane_pair_store(&w->term[1][44+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[18]),
+                lane_pair_load(&w->S[88+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->S[110+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[154+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[176+k]));
+        lane_pair_store(&w->term[1][66+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]),
+                lane_pair_load(&w->S[66+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[110+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[132+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[176+k]));
+        lane_pair_store(&w->term[1][88+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->S[44+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[66+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[88+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[132+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[154+k]));
+        lane_pair_store(&w->term[1][110+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[88+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[82]),
+                lane_pair_load(&w->S[154+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[84]),
+                lane_pair_load(&w->S[176+k]));
+        lane_pair_store(&w->term[1][132+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[98]),
+                lane_pair_load(&w->S[66+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[100]),
+                lane_pair_load(&w->S[132+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[102]),
+                lane_pair_load(&w->S[176+k]));
+        lane_pair_store(&w->term[1][154+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[116]),
+                lane_pair_load(&w->S[88+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[118]),
+                lane_pair_load(&w->S[132+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[120]),
+                lane_pair_load(&w->S[154+k]));
+        lane_pair_store(&w->term[1][176+k], lanes);
     }
     w->term[1][0] = w->term[1][0] + c_out;
     w->term[1][23] = w->term[1][23] + c_out;
     w->term[1][46] = w->term[1][46] + c_out;
     w->term[1][69] = w->term[1][69] + c_out;
-    w->term[1][78] = w->term[1][78] + w->fh[13]*w->S[201];
-    w->term[1][79] = w->term[1][79] + w->fh[14]*w->S[202];
-    w->term[1][80] = w->term[1][80] + w->fh[15]*w->S[203];
-    w->term[1][84] = w->term[1][84] + w->fh[16]*w->S[207];
-    w->term[1][85] = w->term[1][85] + w->fh[17]*w->S[208];
-    w->term[1][86] = w->term[1][86] + w->fh[18]*w->S[209];
+    w->term[1][78] = w->term[1][78] + fh_pairs[26]*w->S[201];
+    w->term[1][79] = w->term[1][79] + fh_pairs[28]*w->S[202];
+    w->term[1][80] = w->term[1][80] + fh_pairs[30]*w->S[203];
+    w->term[1][84] = w->term[1][84] + fh_pairs[32]*w->S[207];
+    w->term[1][85] = w->term[1][85] + fh_pairs[34]*w->S[208];
+    w->term[1][86] = w->term[1][86] + fh_pairs[36]*w->S[209];
     w->term[1][92] = w->term[1][92] + c_out;
-    w->term[1][100] = w->term[1][100] + w->fh[23]*w->S[201];
-    w->term[1][101] = w->term[1][101] + w->fh[24]*w->S[202];
-    w->term[1][102] = w->term[1][102] + w->fh[25]*w->S[203];
-    w->term[1][106] = w->term[1][106] + w->fh[26]*w->S[207];
-    w->term[1][107] = w->term[1][107] + w->fh[27]*w->S[208];
-    w->term[1][108] = w->term[1][108] + w->fh[28]*w->S[209];
+    w->term[1][100] = w->term[1][100] + fh_pairs[46]*w->S[201];
+    w->term[1][101] = w->term[1][101] + fh_pairs[48]*w->S[202];
+    w->term[1][102] = w->term[1][102] + fh_pairs[50]*w->S[203];
+    w->term[1][106] = w->term[1][106] + fh_pairs[52]*w->S[207];
+    w->term[1][107] = w->term[1][107] + fh_pairs[54]*w->S[208];
+    w->term[1][108] = w->term[1][108] + fh_pairs[56]*w->S[209];
     w->term[1][115] = w->term[1][115] + c_out;
-    w->term[1][122] = w->term[1][122] + w->fh[34]*w->S[201];
-    w->term[1][123] = w->term[1][123] + w->fh[35]*w->S[202];
-    w->term[1][124] = w->term[1][124] + w->fh[36]*w->S[203];
-    w->term[1][128] = w->term[1][128] + w->fh[37]*w->S[207];
-    w->term[1][129] = w->term[1][129] + w->fh[38]*w->S[208];
-    w->term[1][130] = w->term[1][130] + w->fh[39]*w->S[209];
+    w->term[1][122] = w->term[1][122] + fh_pairs[68]*w->S[201];
+    w->term[1][123] = w->term[1][123] + fh_pairs[70]*w->S[202];
+    w->term[1][124] = w->term[1][124] + fh_pairs[72]*w->S[203];
+    w->term[1][128] = w->term[1][128] + fh_pairs[74]*w->S[207];
+    w->term[1][129] = w->term[1][129] + fh_pairs[76]*w->S[208];
+    w->term[1][130] = w->term[1][130] + fh_pairs[78]*w->S[209];
     w->term[1][138] = w->term[1][138] + c_out;
-    w->term[1][141] = w->term[1][141] + w->fh[43]*w->S[198];
-    w->term[1][142] = w->term[1][142] + w->fh[44]*w->S[199];
-    w->term[1][143] = w->term[1][143] + w->fh[45]*w->S[200];
-    w->term[1][147] = w->term[1][147] + w->fh[46]*w->S[204];
-    w->term[1][148] = w->term[1][148] + w->fh[47]*w->S[205];
-    w->term[1][149] = w->term[1][149] + w->fh[48]*w->S[206];
+    w->term[1][141] = w->term[1][141] + fh_pairs[86]*w->S[198];
+    w->term[1][142] = w->term[1][142] + fh_pairs[88]*w->S[199];
+    w->term[1][143] = w->term[1][143] + fh_pairs[90]*w->S[200];
+    w->term[1][147] = w->term[1][147] + fh_pairs[92]*w->S[204];
+    w->term[1][148] = w->term[1][148] + fh_pairs[94]*w->S[205];
+    w->term[1][149] = w->term[1][149] + fh_pairs[96]*w->S[206];
     w->term[1][161] = w->term[1][161] + c_out;
-    w->term[1][163] = w->term[1][163] + w->fh[52]*w->S[198];
-    w->term[1][164] = w->term[1][164] + w->fh[53]*w->S[199];
-    w->term[1][165] = w->term[1][165] + w->fh[54]*w->S[200];
-    w->term[1][169] = w->term[1][169] + w->fh[55]*w->S[204];
-    w->term[1][170] = w->term[1][170] + w->fh[56]*w->S[205];
-    w->term[1][171] = w->term[1][171] + w->fh[57]*w->S[206];
+    w->term[1][163] = w->term[1][163] + fh_pairs[104]*w->S[198];
+    w->term[1][164] = w->term[1][164] + fh_pairs[106]*w->S[199];
+    w->term[1][165] = w->term[1][165] + fh_pairs[108]*w->S[200];
+    w->term[1][169] = w->term[1][169] + fh_pairs[110]*w->S[204];
+    w->term[1][170] = w->term[1][170] + fh_pairs[112]*w->S[205];
+    w->term[1][171] = w->term[1][171] + fh_pairs[114]*w->S[206];
     w->term[1][184] = w->term[1][184] + c_out;
-    w->term[1][185] = w->term[1][185] + w->fh[61]*w->S[198];
-    w->term[1][186] = w->term[1][186] + w->fh[62]*w->S[199];
-    w->term[1][187] = w->term[1][187] + w->fh[63]*w->S[200];
-    w->term[1][191] = w->term[1][191] + w->fh[64]*w->S[204];
-    w->term[1][192] = w->term[1][192] + w->fh[65]*w->S[205];
-    w->term[1][193] = w->term[1][193] + w->fh[66]*w->S[206];
-    w->term[1][198] = c_out + w->fh[67]*w->S[198];
-    w->term[1][199] = c_out + w->fh[68]*w->S[199];
-    w->term[1][200] = c_out + w->fh[69]*w->S[200];
-    w->term[1][201] = c_out + w->fh[70]*w->S[201];
-    w->term[1][202] = c_out + w->fh[71]*w->S[202];
-    w->term[1][203] = c_out + w->fh[72]*w->S[203];
-    w->term[1][204] = c_out + w->fh[73]*w->S[204];
-    w->term[1][205] = c_out + w->fh[74]*w->S[205];
-    w->term[1][206] = c_out + w->fh[75]*w->S[206];
-    w->term[1][207] = c_out + w->fh[76]*w->S[207];
-    w->term[1][208] = c_out + w->fh[77]*w->S[208];
-    w->term[1][209] = c_out + w->fh[78]*w->S[209];
+    w->term[1][185] = w->term[1][185] + fh_pairs[122]*w->S[198];
+    w->term[1][186] = w->term[1][186] + fh_pairs[124]*w->S[199];
+    w->term[1][187] = w->term[1][187] + fh_pairs[126]*w->S[200];
+    w->term[1][191] = w->term[1][191] + fh_pairs[128]*w->S[204];
+    w->term[1][192] = w->term[1][192] + fh_pairs[130]*w->S[205];
+    w->term[1][193] = w->term[1][193] + fh_pairs[132]*w->S[206];
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[134], fh_pairs[136]),
+                lane_pair_load(&w->S[198]));
+        lane_pair_store(&w->term[1][198], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[138], fh_pairs[140]),
+                lane_pair_load(&w->S[200]));
+        lane_pair_store(&w->term[1][200], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[142], fh_pairs[144]),
+                lane_pair_load(&w->S[202]));
+        lane_pair_store(&w->term[1][202], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[146], fh_pairs[148]),
+                lane_pair_load(&w->S[204]));
+        lane_pair_store(&w->term[1][204], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[150], fh_pairs[152]),
+                lane_pair_load(&w->S[206]));
+        lane_pair_store(&w->term[1][206], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[154], fh_pairs[156]),
+                lane_pair_load(&w->S[208]));
+        lane_pair_store(&w->term[1][208], pair);
+    }
 }
 
 INS_GNSS21_BLOCK void horner_transition(ins_gnss21_transition *restrict t, const
         ins_gnss21_discretize_scratch *restrict w)
 {
+    const ins_gnss21_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
     for (k = 0; k < 21; ++k) {
-        t->Phi[k] = w->fh[0]*w->S[22+k] + w->fh[1]*w->S[44+k] + w->fh[2]*w->S[66+k];
-        t->Phi[21+k] = w->fh[3]*w->S[k] + w->fh[4]*w->S[44+k] + w->fh[5]*w->S[88+k];
-        t->Phi[42+k] = w->fh[6]*w->S[k] + w->fh[7]*w->S[22+k] + w->fh[8]*w->S[110+k];
-        t->Phi[63+k] = w->fh[9]*w->S[88+k] + w->fh[10]*w->S[110+k] + w->fh[11]*w->S[154+k] +
-                w->fh[12]*w->S[176+k];
-        t->Phi[84+k] = w->fh[19]*w->S[66+k] + w->fh[20]*w->S[110+k] + w->fh[21]*w->S[132+k] +
-                w->fh[22]*w->S[176+k];
-        t->Phi[105+k] = w->fh[29]*w->S[44+k] + w->fh[30]*w->S[66+k] + w->fh[31]*w->S[88+k] +
-                w->fh[32]*w->S[132+k] + w->fh[33]*w->S[154+k];
-        t->Phi[126+k] = w->fh[40]*w->S[88+k] + w->fh[41]*w->S[154+k] + w->fh[42]*w->S[176+k];
-        t->Phi[147+k] = w->fh[49]*w->S[66+k] + w->fh[50]*w->S[132+k] + w->fh[51]*w->S[176+k];
-        t->Phi[168+k] = w->fh[58]*w->S[88+k] + w->fh[59]*w->S[132+k] + w->fh[60]*w->S[154+k];
+        t->Phi[k] = fh_pairs[0]*w->S[22+k] + fh_pairs[2]*w->S[44+k] + fh_pairs[4]*w->S[66+k];
+        t->Phi[21+k] = fh_pairs[6]*w->S[k] + fh_pairs[8]*w->S[44+k] + fh_pairs[10]*w->S[88+k];
+        t->Phi[42+k] = fh_pairs[12]*w->S[k] + fh_pairs[14]*w->S[22+k] + fh_pairs[16]*w->S[110+k];
+        t->Phi[63+k] = fh_pairs[18]*w->S[88+k] + fh_pairs[20]*w->S[110+k] + fh_pairs[22]*w->S[154+k]
+                + fh_pairs[24]*w->S[176+k];
+        t->Phi[84+k] = fh_pairs[38]*w->S[66+k] + fh_pairs[40]*w->S[110+k] + fh_pairs[42]*w->S[132+k]
+                + fh_pairs[44]*w->S[176+k];
+        t->Phi[105+k] = fh_pairs[58]*w->S[44+k] + fh_pairs[60]*w->S[66+k] + fh_pairs[62]*w->S[88+k]
+                + fh_pairs[64]*w->S[132+k] + fh_pairs[66]*w->S[154+k];
+        t->Phi[126+k] = fh_pairs[80]*w->S[88+k] + fh_pairs[82]*w->S[154+k] +
+                fh_pairs[84]*w->S[176+k];
+        t->Phi[147+k] = fh_pairs[98]*w->S[66+k] + fh_pairs[100]*w->S[132+k] +
+                fh_pairs[102]*w->S[176+k];
+        t->Phi[168+k] = fh_pairs[116]*w->S[88+k] + fh_pairs[118]*w->S[132+k] +
+                fh_pairs[120]*w->S[154+k];
     }
-    t->Phi[75] = t->Phi[75] + w->fh[13]*w->S[201];
-    t->Phi[76] = t->Phi[76] + w->fh[14]*w->S[202];
-    t->Phi[77] = t->Phi[77] + w->fh[15]*w->S[203];
-    t->Phi[81] = t->Phi[81] + w->fh[16]*w->S[207];
-    t->Phi[82] = t->Phi[82] + w->fh[17]*w->S[208];
-    t->Phi[83] = t->Phi[83] + w->fh[18]*w->S[209];
-    t->Phi[96] = t->Phi[96] + w->fh[23]*w->S[201];
-    t->Phi[97] = t->Phi[97] + w->fh[24]*w->S[202];
-    t->Phi[98] = t->Phi[98] + w->fh[25]*w->S[203];
-    t->Phi[102] = t->Phi[102] + w->fh[26]*w->S[207];
-    t->Phi[103] = t->Phi[103] + w->fh[27]*w->S[208];
-    t->Phi[104] = t->Phi[104] + w->fh[28]*w->S[209];
-    t->Phi[117] = t->Phi[117] + w->fh[34]*w->S[201];
-    t->Phi[118] = t->Phi[118] + w->fh[35]*w->S[202];
-    t->Phi[119] = t->Phi[119] + w->fh[36]*w->S[203];
-    t->Phi[123] = t->Phi[123] + w->fh[37]*w->S[207];
-    t->Phi[124] = t->Phi[124] + w->fh[38]*w->S[208];
-    t->Phi[125] = t->Phi[125] + w->fh[39]*w->S[209];
-    t->Phi[135] = t->Phi[135] + w->fh[43]*w->S[198];
-    t->Phi[136] = t->Phi[136] + w->fh[44]*w->S[199];
-    t->Phi[137] = t->Phi[137] + w->fh[45]*w->S[200];
-    t->Phi[141] = t->Phi[141] + w->fh[46]*w->S[204];
-    t->Phi[142] = t->Phi[142] + w->fh[47]*w->S[205];
-    t->Phi[143] = t->Phi[143] + w->fh[48]*w->S[206];
-    t->Phi[156] = t->Phi[156] + w->fh[52]*w->S[198];
-    t->Phi[157] = t->Phi[157] + w->fh[53]*w->S[199];
-    t->Phi[158] = t->Phi[158] + w->fh[54]*w->S[200];
-    t->Phi[162] = t->Phi[162] + w->fh[55]*w->S[204];
-    t->Phi[163] = t->Phi[163] + w->fh[56]*w->S[205];
-    t->Phi[164] = t->Phi[164] + w->fh[57]*w->S[206];
-    t->Phi[177] = t->Phi[177] + w->fh[61]*w->S[198];
-    t->Phi[178] = t->Phi[178] + w->fh[62]*w->S[199];
-    t->Phi[179] = t->Phi[179] + w->fh[63]*w->S[200];
-    t->Phi[183] = t->Phi[183] + w->fh[64]*w->S[204];
-    t->Phi[184] = t->Phi[184] + w->fh[65]*w->S[205];
-    t->Phi[185] = t->Phi[185] + w->fh[66]*w->S[206];
-    t->Phi[189] = w->fh[67]*w->S[198];
-    t->Phi[190] = w->fh[68]*w->S[199];
-    t->Phi[191] = w->fh[69]*w->S[200];
-    t->Phi[192] = w->fh[70]*w->S[201];
-    t->Phi[193] = w->fh[71]*w->S[202];
-    t->Phi[194] = w->fh[72]*w->S[203];
-    t->Phi[195] = w->fh[73]*w->S[204];
-    t->Phi[196] = w->fh[74]*w->S[205];
-    t->Phi[197] = w->fh[75]*w->S[206];
-    t->Phi[198] = w->fh[76]*w->S[207];
-    t->Phi[199] = w->fh[77]*w->S[208];
-    t->Phi[200] = w->fh[78]*w->S[209];
+    t->Phi[75] = t->Phi[75] + fh_pairs[26]*w->S[201];
+    t->Phi[76] = t->Phi[76] + fh_pairs[28]*w->S[202];
+    t->Phi[77] = t->Phi[77] + fh_pairs[30]*w->S[203];
+    t->Phi[81] = t->Phi[81] + fh_pairs[32]*w->S[207];
+    t->Phi[82] = t->Phi[82] + fh_pairs[34]*w->S[208];
+    t->Phi[83] = t->Phi[83] + fh_pairs[36]*w->S[209];
+    t->Phi[96] = t->Phi[96] + fh_pairs[46]*w->S[201];
+    t->Phi[97] = t->Phi[97] + fh_pairs[48]*w->S[202];
+    t->Phi[98] = t->Phi[98] + fh_pairs[50]*w->S[203];
+    t->Phi[102] = t->Phi[102] + fh_pairs[52]*w->S[207];
+    t->Phi[103] = t->Phi[103] + fh_pairs[54]*w->S[208];
+    t->Phi[104] = t->Phi[104] + fh_pairs[56]*w->S[209];
+    t->Phi[117] = t->Phi[117] + fh_pairs[68]*w->S[201];
+    t->Phi[118] = t->Phi[118] + fh_pairs[70]*w->S[202];
+    t->Phi[119] = t->Phi[119] + fh_pairs[72]*w->S[203];
+    t->Phi[123] = t->Phi[123] + fh_pairs[74]*w->S[207];
+    t->Phi[124] = t->Phi[124] + fh_pairs[76]*w->S[208];
+    t->Phi[125] = t->Phi[125] + fh_pairs[78]*w->S[209];
+    t->Phi[135] = t->Phi[135] + fh_pairs[86]*w->S[198];
+    t->Phi[136] = t->Phi[136] + fh_pairs[88]*w->S[199];
+    t->Phi[137] = t->Phi[137] + fh_pairs[90]*w->S[200];
+    t->Phi[141] = t->Phi[141] + fh_pairs[92]*w->S[204];
+    t->Phi[142] = t->Phi[142] + fh_pairs[94]*w->S[205];
+    t->Phi[143] = t->Phi[143] + fh_pairs[96]*w->S[206];
+    t->Phi[156] = t->Phi[156] + fh_pairs[104]*w->S[198];
+    t->Phi[157] = t->Phi[157] + fh_pairs[106]*w->S[199];
+    t->Phi[158] = t->Phi[158] + fh_pairs[108]*w->S[200];
+    t->Phi[162] = t->Phi[162] + fh_pairs[110]*w->S[204];
+    t->Phi[163] = t->Phi[163] + fh_pairs[112]*w->S[205];
+    t->Phi[164] = t->Phi[164] + fh_pairs[114]*w->S[206];
+    t->Phi[177] = t->Phi[177] + fh_pairs[122]*w->S[198];
+    t->Phi[178] = t->Phi[178] + fh_pairs[124]*w->S[199];
+    t->Phi[179] = t->Phi[179] + fh_pairs[126]*w->S[200];
+    t->Phi[183] = t->Phi[183] + fh_pairs[128]*w->S[204];
+    t->Phi[184] = t->Phi[184] + fh_pairs[130]*w->S[205];
+    t->Phi[185] = t->Phi[185] + fh_pairs[132]*w->S[206];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[134], fh_pairs[136]),
+                lane_pair_load(&w->S[198]));
+        lane_pair_store(&t->Phi[189], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[138], fh_pairs[140]),
+                lane_pair_load(&w->S[200]));
+        lane_pair_store(&t->Phi[191], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[142], fh_pairs[144]),
+                lane_pair_load(&w->S[202]));
+        lane_pair_store(&t->Phi[193], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[146], fh_pairs[148]),
+                lane_pair_load(&w->S[204]));
+        lane_pair_store(&t->Phi[195], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[150], fh_pairs[152]),
+                lane_pair_load(&w->S[206]));
+        lane_pair_store(&t->Phi[197], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[154], fh_pairs[156]),
+                lane_pair_load(&w->S[208]));
+        lane_pair_store(&t->Phi[199], pair);
+    }
 }
 
 INS_GNSS21_BLOCK void doubling(ins_gnss21_transition *restrict t, ins_gnss21_discretize_scratch
@@ -1869,18 +2160,36 @@ INS_GNSS21_BLOCK void doubling(ins_gnss21_transition *restrict t, ins_gnss21_dis
                 t->Phi[173]*t->Phi[105+k] + t->Phi[174]*t->Phi[126+k] + t->Phi[175]*t->Phi[147+k] +
                 t->Phi[176]*t->Phi[168+k];
     }
-    w->term[0][189] = t->Phi[189]*t->Phi[189];
-    w->term[0][190] = t->Phi[190]*t->Phi[190];
-    w->term[0][191] = t->Phi[191]*t->Phi[191];
-    w->term[0][192] = t->Phi[192]*t->Phi[192];
-    w->term[0][193] = t->Phi[193]*t->Phi[193];
-    w->term[0][194] = t->Phi[194]*t->Phi[194];
-    w->term[0][195] = t->Phi[195]*t->Phi[195];
-    w->term[0][196] = t->Phi[196]*t->Phi[196];
-    w->term[0][197] = t->Phi[197]*t->Phi[197];
-    w->term[0][198] = t->Phi[198]*t->Phi[198];
-    w->term[0][199] = t->Phi[199]*t->Phi[199];
-    w->term[0][200] = t->Phi[200]*t->Phi[200];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[189]),
+                lane_pair_load(&t->Phi[189]));
+        lane_pair_store(&w->term[0][189], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[191]),
+                lane_pair_load(&t->Phi[191]));
+        lane_pair_store(&w->term[0][191], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[193]),
+                lane_pair_load(&t->Phi[193]));
+        lane_pair_store(&w->term[0][193], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[195]),
+                lane_pair_load(&t->Phi[195]));
+        lane_pair_store(&w->term[0][195], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[197]),
+                lane_pair_load(&t->Phi[197]));
+        lane_pair_store(&w->term[0][197], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[199]),
+                lane_pair_load(&t->Phi[199]));
+        lane_pair_store(&w->term[0][199], pair);
+    }
     for (k = 0; k < 21; ++k) {
         w->term[1][k] = t->Phi[0]*w->S[k] + t->Phi[1]*w->S[22+k] + t->Phi[2]*w->S[44+k] +
                 t->Phi[3]*w->S[66+k] + t->Phi[4]*w->S[88+k] + t->Phi[5]*w->S[110+k] +
@@ -1910,636 +2219,1842 @@ INS_GNSS21_BLOCK void doubling(ins_gnss21_transition *restrict t, ins_gnss21_dis
                 t->Phi[171]*w->S[66+k] + t->Phi[172]*w->S[88+k] + t->Phi[173]*w->S[110+k] +
                 t->Phi[174]*w->S[132+k] + t->Phi[175]*w->S[154+k] + t->Phi[176]*w->S[176+k];
     }
-    w->term[1][189] = t->Phi[189]*w->S[198];
-    w->term[1][190] = t->Phi[190]*w->S[199];
-    w->term[1][191] = t->Phi[191]*w->S[200];
-    w->term[1][192] = t->Phi[192]*w->S[201];
-    w->term[1][193] = t->Phi[193]*w->S[202];
-    w->term[1][194] = t->Phi[194]*w->S[203];
-    w->term[1][195] = t->Phi[195]*w->S[204];
-    w->term[1][196] = t->Phi[196]*w->S[205];
-    w->term[1][197] = t->Phi[197]*w->S[206];
-    w->term[1][198] = t->Phi[198]*w->S[207];
-    w->term[1][199] = t->Phi[199]*w->S[208];
-    w->term[1][200] = t->Phi[200]*w->S[209];
-    w->term[0][9] = w->term[0][9] + t->Phi[9]*t->Phi[189];
-    w->term[0][10] = w->term[0][10] + t->Phi[10]*t->Phi[190];
-    w->term[0][11] = w->term[0][11] + t->Phi[11]*t->Phi[191];
-    w->term[0][12] = w->term[0][12] + t->Phi[12]*t->Phi[192];
-    w->term[0][13] = w->term[0][13] + t->Phi[13]*t->Phi[193];
-    w->term[0][14] = w->term[0][14] + t->Phi[14]*t->Phi[194];
-    w->term[0][15] = w->term[0][15] + t->Phi[15]*t->Phi[195];
-    w->term[0][16] = w->term[0][16] + t->Phi[16]*t->Phi[196];
-    w->term[0][17] = w->term[0][17] + t->Phi[17]*t->Phi[197];
-    w->term[0][18] = w->term[0][18] + t->Phi[18]*t->Phi[198];
-    w->term[0][19] = w->term[0][19] + t->Phi[19]*t->Phi[199];
-    w->term[0][20] = w->term[0][20] + t->Phi[20]*t->Phi[200];
-    w->term[0][30] = w->term[0][30] + t->Phi[30]*t->Phi[189];
-    w->term[0][31] = w->term[0][31] + t->Phi[31]*t->Phi[190];
-    w->term[0][32] = w->term[0][32] + t->Phi[32]*t->Phi[191];
-    w->term[0][33] = w->term[0][33] + t->Phi[33]*t->Phi[192];
-    w->term[0][34] = w->term[0][34] + t->Phi[34]*t->Phi[193];
-    w->term[0][35] = w->term[0][35] + t->Phi[35]*t->Phi[194];
-    w->term[0][36] = w->term[0][36] + t->Phi[36]*t->Phi[195];
-    w->term[0][37] = w->term[0][37] + t->Phi[37]*t->Phi[196];
-    w->term[0][38] = w->term[0][38] + t->Phi[38]*t->Phi[197];
-    w->term[0][39] = w->term[0][39] + t->Phi[39]*t->Phi[198];
-    w->term[0][40] = w->term[0][40] + t->Phi[40]*t->Phi[199];
-    w->term[0][41] = w->term[0][41] + t->Phi[41]*t->Phi[200];
-    w->term[0][51] = w->term[0][51] + t->Phi[51]*t->Phi[189];
-    w->term[0][52] = w->term[0][52] + t->Phi[52]*t->Phi[190];
-    w->term[0][53] = w->term[0][53] + t->Phi[53]*t->Phi[191];
-    w->term[0][54] = w->term[0][54] + t->Phi[54]*t->Phi[192];
-    w->term[0][55] = w->term[0][55] + t->Phi[55]*t->Phi[193];
-    w->term[0][56] = w->term[0][56] + t->Phi[56]*t->Phi[194];
-    w->term[0][57] = w->term[0][57] + t->Phi[57]*t->Phi[195];
-    w->term[0][58] = w->term[0][58] + t->Phi[58]*t->Phi[196];
-    w->term[0][59] = w->term[0][59] + t->Phi[59]*t->Phi[197];
-    w->term[0][60] = w->term[0][60] + t->Phi[60]*t->Phi[198];
-    w->term[0][61] = w->term[0][61] + t->Phi[61]*t->Phi[199];
-    w->term[0][62] = w->term[0][62] + t->Phi[62]*t->Phi[200];
-    w->term[0][72] = w->term[0][72] + t->Phi[72]*t->Phi[189];
-    w->term[0][73] = w->term[0][73] + t->Phi[73]*t->Phi[190];
-    w->term[0][74] = w->term[0][74] + t->Phi[74]*t->Phi[191];
-    w->term[0][75] = w->term[0][75] + t->Phi[75]*t->Phi[192];
-    w->term[0][76] = w->term[0][76] + t->Phi[76]*t->Phi[193];
-    w->term[0][77] = w->term[0][77] + t->Phi[77]*t->Phi[194];
-    w->term[0][78] = w->term[0][78] + t->Phi[78]*t->Phi[195];
-    w->term[0][79] = w->term[0][79] + t->Phi[79]*t->Phi[196];
-    w->term[0][80] = w->term[0][80] + t->Phi[80]*t->Phi[197];
-    w->term[0][81] = w->term[0][81] + t->Phi[81]*t->Phi[198];
-    w->term[0][82] = w->term[0][82] + t->Phi[82]*t->Phi[199];
-    w->term[0][83] = w->term[0][83] + t->Phi[83]*t->Phi[200];
-    w->term[0][93] = w->term[0][93] + t->Phi[93]*t->Phi[189];
-    w->term[0][94] = w->term[0][94] + t->Phi[94]*t->Phi[190];
-    w->term[0][95] = w->term[0][95] + t->Phi[95]*t->Phi[191];
-    w->term[0][96] = w->term[0][96] + t->Phi[96]*t->Phi[192];
-    w->term[0][97] = w->term[0][97] + t->Phi[97]*t->Phi[193];
-    w->term[0][98] = w->term[0][98] + t->Phi[98]*t->Phi[194];
-    w->term[0][99] = w->term[0][99] + t->Phi[99]*t->Phi[195];
-    w->term[0][100] = w->term[0][100] + t->Phi[100]*t->Phi[196];
-    w->term[0][101] = w->term[0][101] + t->Phi[101]*t->Phi[197];
-    w->term[0][102] = w->term[0][102] + t->Phi[102]*t->Phi[198];
-    w->term[0][103] = w->term[0][103] + t->Phi[103]*t->Phi[199];
-    w->term[0][104] = w->term[0][104] + t->Phi[104]*t->Phi[200];
-    w->term[0][114] = w->term[0][114] + t->Phi[114]*t->Phi[189];
-    w->term[0][115] = w->term[0][115] + t->Phi[115]*t->Phi[190];
-    w->term[0][116] = w->term[0][116] + t->Phi[116]*t->Phi[191];
-    w->term[0][117] = w->term[0][117] + t->Phi[117]*t->Phi[192];
-    w->term[0][118] = w->term[0][118] + t->Phi[118]*t->Phi[193];
-    w->term[0][119] = w->term[0][119] + t->Phi[119]*t->Phi[194];
-    w->term[0][120] = w->term[0][120] + t->Phi[120]*t->Phi[195];
-    w->term[0][121] = w->term[0][121] + t->Phi[121]*t->Phi[196];
-    w->term[0][122] = w->term[0][122] + t->Phi[122]*t->Phi[197];
-    w->term[0][123] = w->term[0][123] + t->Phi[123]*t->Phi[198];
-    w->term[0][124] = w->term[0][124] + t->Phi[124]*t->Phi[199];
-    w->term[0][125] = w->term[0][125] + t->Phi[125]*t->Phi[200];
-    w->term[0][135] = w->term[0][135] + t->Phi[135]*t->Phi[189];
-    w->term[0][136] = w->term[0][136] + t->Phi[136]*t->Phi[190];
-    w->term[0][137] = w->term[0][137] + t->Phi[137]*t->Phi[191];
-    w->term[0][138] = w->term[0][138] + t->Phi[138]*t->Phi[192];
-    w->term[0][139] = w->term[0][139] + t->Phi[139]*t->Phi[193];
-    w->term[0][140] = w->term[0][140] + t->Phi[140]*t->Phi[194];
-    w->term[0][141] = w->term[0][141] + t->Phi[141]*t->Phi[195];
-    w->term[0][142] = w->term[0][142] + t->Phi[142]*t->Phi[196];
-    w->term[0][143] = w->term[0][143] + t->Phi[143]*t->Phi[197];
-    w->term[0][144] = w->term[0][144] + t->Phi[144]*t->Phi[198];
-    w->term[0][145] = w->term[0][145] + t->Phi[145]*t->Phi[199];
-    w->term[0][146] = w->term[0][146] + t->Phi[146]*t->Phi[200];
-    w->term[0][156] = w->term[0][156] + t->Phi[156]*t->Phi[189];
-    w->term[0][157] = w->term[0][157] + t->Phi[157]*t->Phi[190];
-    w->term[0][158] = w->term[0][158] + t->Phi[158]*t->Phi[191];
-    w->term[0][159] = w->term[0][159] + t->Phi[159]*t->Phi[192];
-    w->term[0][160] = w->term[0][160] + t->Phi[160]*t->Phi[193];
-    w->term[0][161] = w->term[0][161] + t->Phi[161]*t->Phi[194];
-    w->term[0][162] = w->term[0][162] + t->Phi[162]*t->Phi[195];
-    w->term[0][163] = w->term[0][163] + t->Phi[163]*t->Phi[196];
-    w->term[0][164] = w->term[0][164] + t->Phi[164]*t->Phi[197];
-    w->term[0][165] = w->term[0][165] + t->Phi[165]*t->Phi[198];
-    w->term[0][166] = w->term[0][166] + t->Phi[166]*t->Phi[199];
-    w->term[0][167] = w->term[0][167] + t->Phi[167]*t->Phi[200];
-    w->term[0][177] = w->term[0][177] + t->Phi[177]*t->Phi[189];
-    w->term[0][178] = w->term[0][178] + t->Phi[178]*t->Phi[190];
-    w->term[0][179] = w->term[0][179] + t->Phi[179]*t->Phi[191];
-    w->term[0][180] = w->term[0][180] + t->Phi[180]*t->Phi[192];
-    w->term[0][181] = w->term[0][181] + t->Phi[181]*t->Phi[193];
-    w->term[0][182] = w->term[0][182] + t->Phi[182]*t->Phi[194];
-    w->term[0][183] = w->term[0][183] + t->Phi[183]*t->Phi[195];
-    w->term[0][184] = w->term[0][184] + t->Phi[184]*t->Phi[196];
-    w->term[0][185] = w->term[0][185] + t->Phi[185]*t->Phi[197];
-    w->term[0][186] = w->term[0][186] + t->Phi[186]*t->Phi[198];
-    w->term[0][187] = w->term[0][187] + t->Phi[187]*t->Phi[199];
-    w->term[0][188] = w->term[0][188] + t->Phi[188]*t->Phi[200];
-    w->term[1][9] = w->term[1][9] + t->Phi[9]*w->S[198];
-    w->term[1][10] = w->term[1][10] + t->Phi[10]*w->S[199];
-    w->term[1][11] = w->term[1][11] + t->Phi[11]*w->S[200];
-    w->term[1][12] = w->term[1][12] + t->Phi[12]*w->S[201];
-    w->term[1][13] = w->term[1][13] + t->Phi[13]*w->S[202];
-    w->term[1][14] = w->term[1][14] + t->Phi[14]*w->S[203];
-    w->term[1][15] = w->term[1][15] + t->Phi[15]*w->S[204];
-    w->term[1][16] = w->term[1][16] + t->Phi[16]*w->S[205];
-    w->term[1][17] = w->term[1][17] + t->Phi[17]*w->S[206];
-    w->term[1][18] = w->term[1][18] + t->Phi[18]*w->S[207];
-    w->term[1][19] = w->term[1][19] + t->Phi[19]*w->S[208];
-    w->term[1][20] = w->term[1][20] + t->Phi[20]*w->S[209];
-    w->term[1][30] = w->term[1][30] + t->Phi[30]*w->S[198];
-    w->term[1][31] = w->term[1][31] + t->Phi[31]*w->S[199];
-    w->term[1][32] = w->term[1][32] + t->Phi[32]*w->S[200];
-    w->term[1][33] = w->term[1][33] + t->Phi[33]*w->S[201];
-    w->term[1][34] = w->term[1][34] + t->Phi[34]*w->S[202];
-    w->term[1][35] = w->term[1][35] + t->Phi[35]*w->S[203];
-    w->term[1][36] = w->term[1][36] + t->Phi[36]*w->S[204];
-    w->term[1][37] = w->term[1][37] + t->Phi[37]*w->S[205];
-    w->term[1][38] = w->term[1][38] + t->Phi[38]*w->S[206];
-    w->term[1][39] = w->term[1][39] + t->Phi[39]*w->S[207];
-    w->term[1][40] = w->term[1][40] + t->Phi[40]*w->S[208];
-    w->term[1][41] = w->term[1][41] + t->Phi[41]*w->S[209];
-    w->term[1][51] = w->term[1][51] + t->Phi[51]*w->S[198];
-    w->term[1][52] = w->term[1][52] + t->Phi[52]*w->S[199];
-    w->term[1][53] = w->term[1][53] + t->Phi[53]*w->S[200];
-    w->term[1][54] = w->term[1][54] + t->Phi[54]*w->S[201];
-    w->term[1][55] = w->term[1][55] + t->Phi[55]*w->S[202];
-    w->term[1][56] = w->term[1][56] + t->Phi[56]*w->S[203];
-    w->term[1][57] = w->term[1][57] + t->Phi[57]*w->S[204];
-    w->term[1][58] = w->term[1][58] + t->Phi[58]*w->S[205];
-    w->term[1][59] = w->term[1][59] + t->Phi[59]*w->S[206];
-    w->term[1][60] = w->term[1][60] + t->Phi[60]*w->S[207];
-    w->term[1][61] = w->term[1][61] + t->Phi[61]*w->S[208];
-    w->term[1][62] = w->term[1][62] + t->Phi[62]*w->S[209];
-    w->term[1][72] = w->term[1][72] + t->Phi[72]*w->S[198];
-    w->term[1][73] = w->term[1][73] + t->Phi[73]*w->S[199];
-    w->term[1][74] = w->term[1][74] + t->Phi[74]*w->S[200];
-    w->term[1][75] = w->term[1][75] + t->Phi[75]*w->S[201];
-    w->term[1][76] = w->term[1][76] + t->Phi[76]*w->S[202];
-    w->term[1][77] = w->term[1][77] + t->Phi[77]*w->S[203];
-    w->term[1][78] = w->term[1][78] + t->Phi[78]*w->S[204];
-    w->term[1][79] = w->term[1][79] + t->Phi[79]*w->S[205];
-    w->term[1][80] = w->term[1][80] + t->Phi[80]*w->S[206];
-    w->term[1][81] = w->term[1][81] + t->Phi[81]*w->S[207];
-    w->term[1][82] = w->term[1][82] + t->Phi[82]*w->S[208];
-    w->term[1][83] = w->term[1][83] + t->Phi[83]*w->S[209];
-    w->term[1][93] = w->term[1][93] + t->Phi[93]*w->S[198];
-    w->term[1][94] = w->term[1][94] + t->Phi[94]*w->S[199];
-    w->term[1][95] = w->term[1][95] + t->Phi[95]*w->S[200];
-    w->term[1][96] = w->term[1][96] + t->Phi[96]*w->S[201];
-    w->term[1][97] = w->term[1][97] + t->Phi[97]*w->S[202];
-    w->term[1][98] = w->term[1][98] + t->Phi[98]*w->S[203];
-    w->term[1][99] = w->term[1][99] + t->Phi[99]*w->S[204];
-    w->term[1][100] = w->term[1][100] + t->Phi[100]*w->S[205];
-    w->term[1][101] = w->term[1][101] + t->Phi[101]*w->S[206];
-    w->term[1][102] = w->term[1][102] + t->Phi[102]*w->S[207];
-    w->term[1][103] = w->term[1][103] + t->Phi[103]*w->S[208];
-    w->term[1][104] = w->term[1][104] + t->Phi[104]*w->S[209];
-    w->term[1][114] = w->term[1][114] + t->Phi[114]*w->S[198];
-    w->term[1][115] = w->term[1][115] + t->Phi[115]*w->S[199];
-    w->term[1][116] = w->term[1][116] + t->Phi[116]*w->S[200];
-    w->term[1][117] = w->term[1][117] + t->Phi[117]*w->S[201];
-    w->term[1][118] = w->term[1][118] + t->Phi[118]*w->S[202];
-    w->term[1][119] = w->term[1][119] + t->Phi[119]*w->S[203];
-    w->term[1][120] = w->term[1][120] + t->Phi[120]*w->S[204];
-    w->term[1][121] = w->term[1][121] + t->Phi[121]*w->S[205];
-    w->term[1][122] = w->term[1][122] + t->Phi[122]*w->S[206];
-    w->term[1][123] = w->term[1][123] + t->Phi[123]*w->S[207];
-    w->term[1][124] = w->term[1][124] + t->Phi[124]*w->S[208];
-    w->term[1][125] = w->term[1][125] + t->Phi[125]*w->S[209];
-    w->term[1][135] = w->term[1][135] + t->Phi[135]*w->S[198];
-    w->term[1][136] = w->term[1][136] + t->Phi[136]*w->S[199];
-    w->term[1][137] = w->term[1][137] + t->Phi[137]*w->S[200];
-    w->term[1][138] = w->term[1][138] + t->Phi[138]*w->S[201];
-    w->term[1][139] = w->term[1][139] + t->Phi[139]*w->S[202];
-    w->term[1][140] = w->term[1][140] + t->Phi[140]*w->S[203];
-    w->term[1][141] = w->term[1][141] + t->Phi[141]*w->S[204];
-    w->term[1][142] = w->term[1][142] + t->Phi[142]*w->S[205];
-    w->term[1][143] = w->term[1][143] + t->Phi[143]*w->S[206];
-    w->term[1][144] = w->term[1][144] + t->Phi[144]*w->S[207];
-    w->term[1][145] = w->term[1][145] + t->Phi[145]*w->S[208];
-    w->term[1][146] = w->term[1][146] + t->Phi[146]*w->S[209];
-    w->term[1][156] = w->term[1][156] + t->Phi[156]*w->S[198];
-    w->term[1][157] = w->term[1][157] + t->Phi[157]*w->S[199];
-    w->term[1][158] = w->term[1][158] + t->Phi[158]*w->S[200];
-    w->term[1][159] = w->term[1][159] + t->Phi[159]*w->S[201];
-    w->term[1][160] = w->term[1][160] + t->Phi[160]*w->S[202];
-    w->term[1][161] = w->term[1][161] + t->Phi[161]*w->S[203];
-    w->term[1][162] = w->term[1][162] + t->Phi[162]*w->S[204];
-    w->term[1][163] = w->term[1][163] + t->Phi[163]*w->S[205];
-    w->term[1][164] = w->term[1][164] + t->Phi[164]*w->S[206];
-    w->term[1][165] = w->term[1][165] + t->Phi[165]*w->S[207];
-    w->term[1][166] = w->term[1][166] + t->Phi[166]*w->S[208];
-    w->term[1][167] = w->term[1][167] + t->Phi[167]*w->S[209];
-    w->term[1][177] = w->term[1][177] + t->Phi[177]*w->S[198];
-    w->term[1][178] = w->term[1][178] + t->Phi[178]*w->S[199];
-    w->term[1][179] = w->term[1][179] + t->Phi[179]*w->S[200];
-    w->term[1][180] = w->term[1][180] + t->Phi[180]*w->S[201];
-    w->term[1][181] = w->term[1][181] + t->Phi[181]*w->S[202];
-    w->term[1][182] = w->term[1][182] + t->Phi[182]*w->S[203];
-    w->term[1][183] = w->term[1][183] + t->Phi[183]*w->S[204];
-    w->term[1][184] = w->term[1][184] + t->Phi[184]*w->S[205];
-    w->term[1][185] = w->term[1][185] + t->Phi[185]*w->S[206];
-    w->term[1][186] = w->term[1][186] + t->Phi[186]*w->S[207];
-    w->term[1][187] = w->term[1][187] + t->Phi[187]*w->S[208];
-    w->term[1][188] = w->term[1][188] + t->Phi[188]*w->S[209];
-    t->Phi[0] = t->Phi[0] + t->Phi[0] + w->term[0][0];
-    t->Phi[1] = t->Phi[1] + t->Phi[1] + w->term[0][1];
-    t->Phi[2] = t->Phi[2] + t->Phi[2] + w->term[0][2];
-    t->Phi[3] = t->Phi[3] + t->Phi[3] + w->term[0][3];
-    t->Phi[4] = t->Phi[4] + t->Phi[4] + w->term[0][4];
-    t->Phi[5] = t->Phi[5] + t->Phi[5] + w->term[0][5];
-    t->Phi[6] = t->Phi[6] + t->Phi[6] + w->term[0][6];
-    t->Phi[7] = t->Phi[7] + t->Phi[7] + w->term[0][7];
-    t->Phi[8] = t->Phi[8] + t->Phi[8] + w->term[0][8];
-    t->Phi[9] = t->Phi[9] + t->Phi[9] + w->term[0][9];
-    t->Phi[10] = t->Phi[10] + t->Phi[10] + w->term[0][10];
-    t->Phi[11] = t->Phi[11] + t->Phi[11] + w->term[0][11];
-    t->Phi[12] = t->Phi[12] + t->Phi[12] + w->term[0][12];
-    t->Phi[13] = t->Phi[13] + t->Phi[13] + w->term[0][13];
-    t->Phi[14] = t->Phi[14] + t->Phi[14] + w->term[0][14];
-    t->Phi[15] = t->Phi[15] + t->Phi[15] + w->term[0][15];
-    t->Phi[16] = t->Phi[16] + t->Phi[16] + w->term[0][16];
-    t->Phi[17] = t->Phi[17] + t->Phi[17] + w->term[0][17];
-    t->Phi[18] = t->Phi[18] + t->Phi[18] + w->term[0][18];
-    t->Phi[19] = t->Phi[19] + t->Phi[19] + w->term[0][19];
-    t->Phi[20] = t->Phi[20] + t->Phi[20] + w->term[0][20];
-    t->Phi[21] = t->Phi[21] + t->Phi[21] + w->term[0][21];
-    t->Phi[22] = t->Phi[22] + t->Phi[22] + w->term[0][22];
-    t->Phi[23] = t->Phi[23] + t->Phi[23] + w->term[0][23];
-    t->Phi[24] = t->Phi[24] + t->Phi[24] + w->term[0][24];
-    t->Phi[25] = t->Phi[25] + t->Phi[25] + w->term[0][25];
-    t->Phi[26] = t->Phi[26] + t->Phi[26] + w->term[0][26];
-    t->Phi[27] = t->Phi[27] + t->Phi[27] + w->term[0][27];
-    t->Phi[28] = t->Phi[28] + t->Phi[28] + w->term[0][28];
-    t->Phi[29] = t->Phi[29] + t->Phi[29] + w->term[0][29];
-    t->Phi[30] = t->Phi[30] + t->Phi[30] + w->term[0][30];
-    t->Phi[31] = t->Phi[31] + t->Phi[31] + w->term[0][31];
-    t->Phi[32] = t->Phi[32] + t->Phi[32] + w->term[0][32];
-    t->Phi[33] = t->Phi[33] + t->Phi[33] + w->term[0][33];
-    t->Phi[34] = t->Phi[34] + t->Phi[34] + w->term[0][34];
-    t->Phi[35] = t->Phi[35] + t->Phi[35] + w->term[0][35];
-    t->Phi[36] = t->Phi[36] + t->Phi[36] + w->term[0][36];
-    t->Phi[37] = t->Phi[37] + t->Phi[37] + w->term[0][37];
-    t->Phi[38] = t->Phi[38] + t->Phi[38] + w->term[0][38];
-    t->Phi[39] = t->Phi[39] + t->Phi[39] + w->term[0][39];
-    t->Phi[40] = t->Phi[40] + t->Phi[40] + w->term[0][40];
-    t->Phi[41] = t->Phi[41] + t->Phi[41] + w->term[0][41];
-    t->Phi[42] = t->Phi[42] + t->Phi[42] + w->term[0][42];
-    t->Phi[43] = t->Phi[43] + t->Phi[43] + w->term[0][43];
-    t->Phi[44] = t->Phi[44] + t->Phi[44] + w->term[0][44];
-    t->Phi[45] = t->Phi[45] + t->Phi[45] + w->term[0][45];
-    t->Phi[46] = t->Phi[46] + t->Phi[46] + w->term[0][46];
-    t->Phi[47] = t->Phi[47] + t->Phi[47] + w->term[0][47];
-    t->Phi[48] = t->Phi[48] + t->Phi[48] + w->term[0][48];
-    t->Phi[49] = t->Phi[49] + t->Phi[49] + w->term[0][49];
-    t->Phi[50] = t->Phi[50] + t->Phi[50] + w->term[0][50];
-    t->Phi[51] = t->Phi[51] + t->Phi[51] + w->term[0][51];
-    t->Phi[52] = t->Phi[52] + t->Phi[52] + w->term[0][52];
-    t->Phi[53] = t->Phi[53] + t->Phi[53] + w->term[0][53];
-    t->Phi[54] = t->Phi[54] + t->Phi[54] + w->term[0][54];
-    t->Phi[55] = t->Phi[55] + t->Phi[55] + w->term[0][55];
-    t->Phi[56] = t->Phi[56] + t->Phi[56] + w->term[0][56];
-    t->Phi[57] = t->Phi[57] + t->Phi[57] + w->term[0][57];
-    t->Phi[58] = t->Phi[58] + t->Phi[58] + w->term[0][58];
-    t->Phi[59] = t->Phi[59] + t->Phi[59] + w->term[0][59];
-    t->Phi[60] = t->Phi[60] + t->Phi[60] + w->term[0][60];
-    t->Phi[61] = t->Phi[61] + t->Phi[61] + w->term[0][61];
-    t->Phi[62] = t->Phi[62] + t->Phi[62] + w->term[0][62];
-    t->Phi[63] = t->Phi[63] + t->Phi[63] + w->term[0][63];
-    t->Phi[64] = t->Phi[64] + t->Phi[64] + w->term[0][64];
-    t->Phi[65] = t->Phi[65] + t->Phi[65] + w->term[0][65];
-    t->Phi[66] = t->Phi[66] + t->Phi[66] + w->term[0][66];
-    t->Phi[67] = t->Phi[67] + t->Phi[67] + w->term[0][67];
-    t->Phi[68] = t->Phi[68] + t->Phi[68] + w->term[0][68];
-    t->Phi[69] = t->Phi[69] + t->Phi[69] + w->term[0][69];
-    t->Phi[70] = t->Phi[70] + t->Phi[70] + w->term[0][70];
-    t->Phi[71] = t->Phi[71] + t->Phi[71] + w->term[0][71];
-    t->Phi[72] = t->Phi[72] + t->Phi[72] + w->term[0][72];
-    t->Phi[73] = t->Phi[73] + t->Phi[73] + w->term[0][73];
-    t->Phi[74] = t->Phi[74] + t->Phi[74] + w->term[0][74];
-    t->Phi[75] = t->Phi[75] + t->Phi[75] + w->term[0][75];
-    t->Phi[76] = t->Phi[76] + t->Phi[76] + w->term[0][76];
-    t->Phi[77] = t->Phi[77] + t->Phi[77] + w->term[0][77];
-    t->Phi[78] = t->Phi[78] + t->Phi[78] + w->term[0][78];
-    t->Phi[79] = t->Phi[79] + t->Phi[79] + w->term[0][79];
-    t->Phi[80] = t->Phi[80] + t->Phi[80] + w->term[0][80];
-    t->Phi[81] = t->Phi[81] + t->Phi[81] + w->term[0][81];
-    t->Phi[82] = t->Phi[82] + t->Phi[82] + w->term[0][82];
-    t->Phi[83] = t->Phi[83] + t->Phi[83] + w->term[0][83];
-    t->Phi[84] = t->Phi[84] + t->Phi[84] + w->term[0][84];
-    t->Phi[85] = t->Phi[85] + t->Phi[85] + w->term[0][85];
-    t->Phi[86] = t->Phi[86] + t->Phi[86] + w->term[0][86];
-    t->Phi[87] = t->Phi[87] + t->Phi[87] + w->term[0][87];
-    t->Phi[88] = t->Phi[88] + t->Phi[88] + w->term[0][88];
-    t->Phi[89] = t->Phi[89] + t->Phi[89] + w->term[0][89];
-    t->Phi[90] = t->Phi[90] + t->Phi[90] + w->term[0][90];
-    t->Phi[91] = t->Phi[91] + t->Phi[91] + w->term[0][91];
-    t->Phi[92] = t->Phi[92] + t->Phi[92] + w->term[0][92];
-    t->Phi[93] = t->Phi[93] + t->Phi[93] + w->term[0][93];
-    t->Phi[94] = t->Phi[94] + t->Phi[94] + w->term[0][94];
-    t->Phi[95] = t->Phi[95] + t->Phi[95] + w->term[0][95];
-    t->Phi[96] = t->Phi[96] + t->Phi[96] + w->term[0][96];
-    t->Phi[97] = t->Phi[97] + t->Phi[97] + w->term[0][97];
-    t->Phi[98] = t->Phi[98] + t->Phi[98] + w->term[0][98];
-    t->Phi[99] = t->Phi[99] + t->Phi[99] + w->term[0][99];
-    t->Phi[100] = t->Phi[100] + t->Phi[100] + w->term[0][100];
-    t->Phi[101] = t->Phi[101] + t->Phi[101] + w->term[0][101];
-    t->Phi[102] = t->Phi[102] + t->Phi[102] + w->term[0][102];
-    t->Phi[103] = t->Phi[103] + t->Phi[103] + w->term[0][103];
-    t->Phi[104] = t->Phi[104] + t->Phi[104] + w->term[0][104];
-    t->Phi[105] = t->Phi[105] + t->Phi[105] + w->term[0][105];
-    t->Phi[106] = t->Phi[106] + t->Phi[106] + w->term[0][106];
-    t->Phi[107] = t->Phi[107] + t->Phi[107] + w->term[0][107];
-    t->Phi[108] = t->Phi[108] + t->Phi[108] + w->term[0][108];
-    t->Phi[109] = t->Phi[109] + t->Phi[109] + w->term[0][109];
-    t->Phi[110] = t->Phi[110] + t->Phi[110] + w->term[0][110];
-    t->Phi[111] = t->Phi[111] + t->Phi[111] + w->term[0][111];
-    t->Phi[112] = t->Phi[112] + t->Phi[112] + w->term[0][112];
-    t->Phi[113] = t->Phi[113] + t->Phi[113] + w->term[0][113];
-    t->Phi[114] = t->Phi[114] + t->Phi[114] + w->term[0][114];
-    t->Phi[115] = t->Phi[115] + t->Phi[115] + w->term[0][115];
-    t->Phi[116] = t->Phi[116] + t->Phi[116] + w->term[0][116];
-    t->Phi[117] = t->Phi[117] + t->Phi[117] + w->term[0][117];
-    t->Phi[118] = t->Phi[118] + t->Phi[118] + w->term[0][118];
-    t->Phi[119] = t->Phi[119] + t->Phi[119] + w->term[0][119];
-    t->Phi[120] = t->Phi[120] + t->Phi[120] + w->term[0][120];
-    t->Phi[121] = t->Phi[121] + t->Phi[121] + w->term[0][121];
-    t->Phi[122] = t->Phi[122] + t->Phi[122] + w->term[0][122];
-    t->Phi[123] = t->Phi[123] + t->Phi[123] + w->term[0][123];
-    t->Phi[124] = t->Phi[124] + t->Phi[124] + w->term[0][124];
-    t->Phi[125] = t->Phi[125] + t->Phi[125] + w->term[0][125];
-    t->Phi[126] = t->Phi[126] + t->Phi[126] + w->term[0][126];
-    t->Phi[127] = t->Phi[127] + t->Phi[127] + w->term[0][127];
-    t->Phi[128] = t->Phi[128] + t->Phi[128] + w->term[0][128];
-    t->Phi[129] = t->Phi[129] + t->Phi[129] + w->term[0][129];
-    t->Phi[130] = t->Phi[130] + t->Phi[130] + w->term[0][130];
-    t->Phi[131] = t->Phi[131] + t->Phi[131] + w->term[0][131];
-    t->Phi[132] = t->Phi[132] + t->Phi[132] + w->term[0][132];
-    t->Phi[133] = t->Phi[133] + t->Phi[133] + w->term[0][133];
-    t->Phi[134] = t->Phi[134] + t->Phi[134] + w->term[0][134];
-    t->Phi[135] = t->Phi[135] + t->Phi[135] + w->term[0][135];
-    t->Phi[136] = t->Phi[136] + t->Phi[136] + w->term[0][136];
-    t->Phi[137] = t->Phi[137] + t->Phi[137] + w->term[0][137];
-    t->Phi[138] = t->Phi[138] + t->Phi[138] + w->term[0][138];
-    t->Phi[139] = t->Phi[139] + t->Phi[139] + w->term[0][139];
-    t->Phi[140] = t->Phi[140] + t->Phi[140] + w->term[0][140];
-    t->Phi[141] = t->Phi[141] + t->Phi[141] + w->term[0][141];
-    t->Phi[142] = t->Phi[142] + t->Phi[142] + w->term[0][142];
-    t->Phi[143] = t->Phi[143] + t->Phi[143] + w->term[0][143];
-    t->Phi[144] = t->Phi[144] + t->Phi[144] + w->term[0][144];
-    t->Phi[145] = t->Phi[145] + t->Phi[145] + w->term[0][145];
-    t->Phi[146] = t->Phi[146] + t->Phi[146] + w->term[0][146];
-    t->Phi[147] = t->Phi[147] + t->Phi[147] + w->term[0][147];
-    t->Phi[148] = t->Phi[148] + t->Phi[148] + w->term[0][148];
-    t->Phi[149] = t->Phi[149] + t->Phi[149] + w->term[0][149];
-    t->Phi[150] = t->Phi[150] + t->Phi[150] + w->term[0][150];
-    t->Phi[151] = t->Phi[151] + t->Phi[151] + w->term[0][151];
-    t->Phi[152] = t->Phi[152] + t->Phi[152] + w->term[0][152];
-    t->Phi[153] = t->Phi[153] + t->Phi[153] + w->term[0][153];
-    t->Phi[154] = t->Phi[154] + t->Phi[154] + w->term[0][154];
-    t->Phi[155] = t->Phi[155] + t->Phi[155] + w->term[0][155];
-    t->Phi[156] = t->Phi[156] + t->Phi[156] + w->term[0][156];
-    t->Phi[157] = t->Phi[157] + t->Phi[157] + w->term[0][157];
-    t->Phi[158] = t->Phi[158] + t->Phi[158] + w->term[0][158];
-    t->Phi[159] = t->Phi[159] + t->Phi[159] + w->term[0][159];
-    t->Phi[160] = t->Phi[160] + t->Phi[160] + w->term[0][160];
-    t->Phi[161] = t->Phi[161] + t->Phi[161] + w->term[0][161];
-    t->Phi[162] = t->Phi[162] + t->Phi[162] + w->term[0][162];
-    t->Phi[163] = t->Phi[163] + t->Phi[163] + w->term[0][163];
-    t->Phi[164] = t->Phi[164] + t->Phi[164] + w->term[0][164];
-    t->Phi[165] = t->Phi[165] + t->Phi[165] + w->term[0][165];
-    t->Phi[166] = t->Phi[166] + t->Phi[166] + w->term[0][166];
-    t->Phi[167] = t->Phi[167] + t->Phi[167] + w->term[0][167];
-    t->Phi[168] = t->Phi[168] + t->Phi[168] + w->term[0][168];
-    t->Phi[169] = t->Phi[169] + t->Phi[169] + w->term[0][169];
-    t->Phi[170] = t->Phi[170] + t->Phi[170] + w->term[0][170];
-    t->Phi[171] = t->Phi[171] + t->Phi[171] + w->term[0][171];
-    t->Phi[172] = t->Phi[172] + t->Phi[172] + w->term[0][172];
-    t->Phi[173] = t->Phi[173] + t->Phi[173] + w->term[0][173];
-    t->Phi[174] = t->Phi[174] + t->Phi[174] + w->term[0][174];
-    t->Phi[175] = t->Phi[175] + t->Phi[175] + w->term[0][175];
-    t->Phi[176] = t->Phi[176] + t->Phi[176] + w->term[0][176];
-    t->Phi[177] = t->Phi[177] + t->Phi[177] + w->term[0][177];
-    t->Phi[178] = t->Phi[178] + t->Phi[178] + w->term[0][178];
-    t->Phi[179] = t->Phi[179] + t->Phi[179] + w->term[0][179];
-    t->Phi[180] = t->Phi[180] + t->Phi[180] + w->term[0][180];
-    t->Phi[181] = t->Phi[181] + t->Phi[181] + w->term[0][181];
-    t->Phi[182] = t->Phi[182] + t->Phi[182] + w->term[0][182];
-    t->Phi[183] = t->Phi[183] + t->Phi[183] + w->term[0][183];
-    t->Phi[184] = t->Phi[184] + t->Phi[184] + w->term[0][184];
-    t->Phi[185] = t->Phi[185] + t->Phi[185] + w->term[0][185];
-    t->Phi[186] = t->Phi[186] + t->Phi[186] + w->term[0][186];
-    t->Phi[187] = t->Phi[187] + t->Phi[187] + w->term[0][187];
-    t->Phi[188] = t->Phi[188] + t->Phi[188] + w->term[0][188];
-    t->Phi[189] = t->Phi[189] + t->Phi[189] + w->term[0][189];
-    t->Phi[190] = t->Phi[190] + t->Phi[190] + w->term[0][190];
-    t->Phi[191] = t->Phi[191] + t->Phi[191] + w->term[0][191];
-    t->Phi[192] = t->Phi[192] + t->Phi[192] + w->term[0][192];
-    t->Phi[193] = t->Phi[193] + t->Phi[193] + w->term[0][193];
-    t->Phi[194] = t->Phi[194] + t->Phi[194] + w->term[0][194];
-    t->Phi[195] = t->Phi[195] + t->Phi[195] + w->term[0][195];
-    t->Phi[196] = t->Phi[196] + t->Phi[196] + w->term[0][196];
-    t->Phi[197] = t->Phi[197] + t->Phi[197] + w->term[0][197];
-    t->Phi[198] = t->Phi[198] + t->Phi[198] + w->term[0][198];
-    t->Phi[199] = t->Phi[199] + t->Phi[199] + w->term[0][199];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[189]),
+                lane_pair_load(&w->S[198]));
+        lane_pair_store(&w->term[1][189], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[191]),
+                lane_pair_load(&w->S[200]));
+        lane_pair_store(&w->term[1][191], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[193]),
+                lane_pair_load(&w->S[202]));
+        lane_pair_store(&w->term[1][193], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[195]),
+                lane_pair_load(&w->S[204]));
+        lane_pair_store(&w->term[1][195], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[197]),
+                lane_pair_load(&w->S[206]));
+        lane_pair_store(&w->term[1][197], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[199]),
+                lane_pair_load(&w->S[208]));
+        lane_pair_store(&w->term[1][199], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][9]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[9]),
+                lane_pair_load(&t->Phi[189]));
+        lane_pair_store(&w->term[0][9], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][11]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[11]),
+                lane_pair_load(&t->Phi[191]));
+        lane_pair_store(&w->term[0][11], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][13]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[13]),
+                lane_pair_load(&t->Phi[193]));
+        lane_pair_store(&w->term[0][13], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][15]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[15]),
+                lane_pair_load(&t->Phi[195]));
+        lane_pair_store(&w->term[0][15], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][17]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[17]),
+                lane_pair_load(&t->Phi[197]));
+        lane_pair_store(&w->term[0][17], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][19]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[19]),
+                lane_pair_load(&t->Phi[199]));
+        lane_pair_store(&w->term[0][19], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][30]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[30]),
+                lane_pair_load(&t->Phi[189]));
+        lane_pair_store(&w->term[0][30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][32]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[32]),
+                lane_pair_load(&t->Phi[191]));
+        lane_pair_store(&w->term[0][32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][34]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[34]),
+                lane_pair_load(&t->Phi[193]));
+        lane_pair_store(&w->term[0][34], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][36]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[36]),
+                lane_pair_load(&t->Phi[195]));
+        lane_pair_store(&w->term[0][36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][38]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[38]),
+                lane_pair_load(&t->Phi[197]));
+        lane_pair_store(&w->term[0][38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][40]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[40]),
+                lane_pair_load(&t->Phi[199]));
+        lane_pair_store(&w->term[0][40], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][51]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[51]),
+                lane_pair_load(&t->Phi[189]));
+        lane_pair_store(&w->term[0][51], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][53]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[53]),
+                lane_pair_load(&t->Phi[191]));
+        lane_pair_store(&w->term[0][53], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][55]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[55]),
+                lane_pair_load(&t->Phi[193]));
+        lane_pair_store(&w->term[0][55], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][57]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[57]),
+                lane_pair_load(&t->Phi[195]));
+        lane_pair_store(&w->term[0][57], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][59]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[59]),
+                lane_pair_load(&t->Phi[197]));
+        lane_pair_store(&w->term[0][59], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][61]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[61]),
+                lane_pair_load(&t->Phi[199]));
+        lane_pair_store(&w->term[0][61], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][72]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[72]),
+                lane_pair_load(&t->Phi[189]));
+        lane_pair_store(&w->term[0][72], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][74]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[74]),
+                lane_pair_load(&t->Phi[191]));
+        lane_pair_store(&w->term[0][74], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][76]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[76]),
+                lane_pair_load(&t->Phi[193]));
+        lane_pair_store(&w->term[0][76], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][78]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[78]),
+                lane_pair_load(&t->Phi[195]));
+        lane_pair_store(&w->term[0][78], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][80]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[80]),
+                lane_pair_load(&t->Phi[197]));
+        lane_pair_store(&w->term[0][80], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][82]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[82]),
+                lane_pair_load(&t->Phi[199]));
+        lane_pair_store(&w->term[0][82], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][93]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[93]),
+                lane_pair_load(&t->Phi[189]));
+        lane_pair_store(&w->term[0][93], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][95]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[95]),
+                lane_pair_load(&t->Phi[191]));
+        lane_pair_store(&w->term[0][95], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][97]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[97]),
+                lane_pair_load(&t->Phi[193]));
+        lane_pair_store(&w->term[0][97], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][99]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[99]),
+                lane_pair_load(&t->Phi[195]));
+        lane_pair_store(&w->term[0][99], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][101]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[101]),
+                lane_pair_load(&t->Phi[197]));
+        lane_pair_store(&w->term[0][101], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][103]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[103]),
+                lane_pair_load(&t->Phi[199]));
+        lane_pair_store(&w->term[0][103], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][114]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[114]),
+                lane_pair_load(&t->Phi[189]));
+        lane_pair_store(&w->term[0][114], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][116]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[116]),
+                lane_pair_load(&t->Phi[191]));
+        lane_pair_store(&w->term[0][116], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][118]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[118]),
+                lane_pair_load(&t->Phi[193]));
+        lane_pair_store(&w->term[0][118], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][120]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[120]),
+                lane_pair_load(&t->Phi[195]));
+        lane_pair_store(&w->term[0][120], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][122]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[122]),
+                lane_pair_load(&t->Phi[197]));
+        lane_pair_store(&w->term[0][122], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][124]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[124]),
+                lane_pair_load(&t->Phi[199]));
+        lane_pair_store(&w->term[0][124], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][135]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[135]),
+                lane_pair_load(&t->Phi[189]));
+        lane_pair_store(&w->term[0][135], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][137]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[137]),
+                lane_pair_load(&t->Phi[191]));
+        lane_pair_store(&w->term[0][137], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][139]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[139]),
+                lane_pair_load(&t->Phi[193]));
+        lane_pair_store(&w->term[0][139], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][141]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[141]),
+                lane_pair_load(&t->Phi[195]));
+        lane_pair_store(&w->term[0][141], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][143]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[143]),
+                lane_pair_load(&t->Phi[197]));
+        lane_pair_store(&w->term[0][143], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][145]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[145]),
+                lane_pair_load(&t->Phi[199]));
+        lane_pair_store(&w->term[0][145], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][156]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[156]),
+                lane_pair_load(&t->Phi[189]));
+        lane_pair_store(&w->term[0][156], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][158]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[158]),
+                lane_pair_load(&t->Phi[191]));
+        lane_pair_store(&w->term[0][158], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][160]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[160]),
+                lane_pair_load(&t->Phi[193]));
+        lane_pair_store(&w->term[0][160], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][162]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[162]),
+                lane_pair_load(&t->Phi[195]));
+        lane_pair_store(&w->term[0][162], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][164]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[164]),
+                lane_pair_load(&t->Phi[197]));
+        lane_pair_store(&w->term[0][164], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][166]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[166]),
+                lane_pair_load(&t->Phi[199]));
+        lane_pair_store(&w->term[0][166], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][177]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[177]),
+                lane_pair_load(&t->Phi[189]));
+        lane_pair_store(&w->term[0][177], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][179]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[179]),
+                lane_pair_load(&t->Phi[191]));
+        lane_pair_store(&w->term[0][179], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][181]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[181]),
+                lane_pair_load(&t->Phi[193]));
+        lane_pair_store(&w->term[0][181], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][183]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[183]),
+                lane_pair_load(&t->Phi[195]));
+        lane_pair_store(&w->term[0][183], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][185]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[185]),
+                lane_pair_load(&t->Phi[197]));
+        lane_pair_store(&w->term[0][185], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][187]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[187]),
+                lane_pair_load(&t->Phi[199]));
+        lane_pair_store(&w->term[0][187], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][9]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[9]), lane_pair_load(&w->S[198]));
+        lane_pair_store(&w->term[1][9], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][11]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[11]), lane_pair_load(&w->S[200]));
+        lane_pair_store(&w->term[1][11], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][13]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[13]), lane_pair_load(&w->S[202]));
+        lane_pair_store(&w->term[1][13], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][15]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[15]), lane_pair_load(&w->S[204]));
+        lane_pair_store(&w->term[1][15], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][17]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[17]), lane_pair_load(&w->S[206]));
+        lane_pair_store(&w->term[1][17], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][19]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[19]), lane_pair_load(&w->S[208]));
+        lane_pair_store(&w->term[1][19], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][30]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[30]), lane_pair_load(&w->S[198]));
+        lane_pair_store(&w->term[1][30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][32]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[32]), lane_pair_load(&w->S[200]));
+        lane_pair_store(&w->term[1][32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][34]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[34]), lane_pair_load(&w->S[202]));
+        lane_pair_store(&w->term[1][34], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][36]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[36]), lane_pair_load(&w->S[204]));
+        lane_pair_store(&w->term[1][36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][38]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[38]), lane_pair_load(&w->S[206]));
+        lane_pair_store(&w->term[1][38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][40]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[40]), lane_pair_load(&w->S[208]));
+        lane_pair_store(&w->term[1][40], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][51]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[51]), lane_pair_load(&w->S[198]));
+        lane_pair_store(&w->term[1][51], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][53]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[53]), lane_pair_load(&w->S[200]));
+        lane_pair_store(&w->term[1][53], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][55]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[55]), lane_pair_load(&w->S[202]));
+        lane_pair_store(&w->term[1][55], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][57]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[57]), lane_pair_load(&w->S[204]));
+        lane_pair_store(&w->term[1][57], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][59]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[59]), lane_pair_load(&w->S[206]));
+        lane_pair_store(&w->term[1][59], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][61]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[61]), lane_pair_load(&w->S[208]));
+        lane_pair_store(&w->term[1][61], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][72]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[72]), lane_pair_load(&w->S[198]));
+        lane_pair_store(&w->term[1][72], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][74]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[74]), lane_pair_load(&w->S[200]));
+        lane_pair_store(&w->term[1][74], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][76]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[76]), lane_pair_load(&w->S[202]));
+        lane_pair_store(&w->term[1][76], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][78]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[78]), lane_pair_load(&w->S[204]));
+        lane_pair_store(&w->term[1][78], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][80]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[80]), lane_pair_load(&w->S[206]));
+        lane_pair_store(&w->term[1][80], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][82]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[82]), lane_pair_load(&w->S[208]));
+        lane_pair_store(&w->term[1][82], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][93]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[93]), lane_pair_load(&w->S[198]));
+        lane_pair_store(&w->term[1][93], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][95]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[95]), lane_pair_load(&w->S[200]));
+        lane_pair_store(&w->term[1][95], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][97]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[97]), lane_pair_load(&w->S[202]));
+        lane_pair_store(&w->term[1][97], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][99]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[99]), lane_pair_load(&w->S[204]));
+        lane_pair_store(&w->term[1][99], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][101]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[101]),
+                lane_pair_load(&w->S[206]));
+        lane_pair_store(&w->term[1][101], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][103]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[103]),
+                lane_pair_load(&w->S[208]));
+        lane_pair_store(&w->term[1][103], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][114]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[114]),
+                lane_pair_load(&w->S[198]));
+        lane_pair_store(&w->term[1][114], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][116]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[116]),
+                lane_pair_load(&w->S[200]));
+        lane_pair_store(&w->term[1][116], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][118]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[118]),
+                lane_pair_load(&w->S[202]));
+        lane_pair_store(&w->term[1][118], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][120]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[120]),
+                lane_pair_load(&w->S[204]));
+        lane_pair_store(&w->term[1][120], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][122]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[122]),
+                lane_pair_load(&w->S[206]));
+        lane_pair_store(&w->term[1][122], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][124]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[124]),
+                lane_pair_load(&w->S[208]));
+        lane_pair_store(&w->term[1][124], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][135]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[135]),
+                lane_pair_load(&w->S[198]));
+        lane_pair_store(&w->term[1][135], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][137]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[137]),
+                lane_pair_load(&w->S[200]));
+        lane_pair_store(&w->term[1][137], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][139]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[139]),
+                lane_pair_load(&w->S[202]));
+        lane_pair_store(&w->term[1][139], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][141]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[141]),
+                lane_pair_load(&w->S[204]));
+        lane_pair_store(&w->term[1][141], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][143]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[143]),
+                lane_pair_load(&w->S[206]));
+        lane_pair_store(&w->term[1][143], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][145]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[145]),
+                lane_pair_load(&w->S[208]));
+        lane_pair_store(&w->term[1][145], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][156]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[156]),
+                lane_pair_load(&w->S[198]));
+        lane_pair_store(&w->term[1][156], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][158]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[158]),
+                lane_pair_load(&w->S[200]));
+        lane_pair_store(&w->term[1][158], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][160]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[160]),
+                lane_pair_load(&w->S[202]));
+        lane_pair_store(&w->term[1][160], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][162]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[162]),
+                lane_pair_load(&w->S[204]));
+        lane_pair_store(&w->term[1][162], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][164]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[164]),
+                lane_pair_load(&w->S[206]));
+        lane_pair_store(&w->term[1][164], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][166]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[166]),
+                lane_pair_load(&w->S[208]));
+        lane_pair_store(&w->term[1][166], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][177]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[177]),
+                lane_pair_load(&w->S[198]));
+        lane_pair_store(&w->term[1][177], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][179]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[179]),
+                lane_pair_load(&w->S[200]));
+        lane_pair_store(&w->term[1][179], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][181]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[181]),
+                lane_pair_load(&w->S[202]));
+        lane_pair_store(&w->term[1][181], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][183]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[183]),
+                lane_pair_load(&w->S[204]));
+        lane_pair_store(&w->term[1][183], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][185]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[185]),
+                lane_pair_load(&w->S[206]));
+        lane_pair_store(&w->term[1][185], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][187]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[187]),
+                lane_pair_load(&w->S[208]));
+        lane_pair_store(&w->term[1][187], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[0]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[0]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][0]));
+        lane_pair_store(&t->Phi[0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[2]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[2]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][2]));
+        lane_pair_store(&t->Phi[2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[4]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[4]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][4]));
+        lane_pair_store(&t->Phi[4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[6]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[6]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][6]));
+        lane_pair_store(&t->Phi[6], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[8]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[8]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][8]));
+        lane_pair_store(&t->Phi[8], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[10]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[10]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][10]));
+        lane_pair_store(&t->Phi[10], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[12]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[12]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][12]));
+        lane_pair_store(&t->Phi[12], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[14]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[14]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][14]));
+        lane_pair_store(&t->Phi[14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[16]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[16]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][16]));
+        lane_pair_store(&t->Phi[16], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[18]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[18]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][18]));
+        lane_pair_store(&t->Phi[18], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[20]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[20]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][20]));
+        lane_pair_store(&t->Phi[20], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[22]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[22]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][22]));
+        lane_pair_store(&t->Phi[22], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[24]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[24]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][24]));
+        lane_pair_store(&t->Phi[24], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[26]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[26]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][26]));
+        lane_pair_store(&t->Phi[26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[28]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[28]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][28]));
+        lane_pair_store(&t->Phi[28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[30]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[30]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][30]));
+        lane_pair_store(&t->Phi[30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[32]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[32]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][32]));
+        lane_pair_store(&t->Phi[32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[34]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[34]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][34]));
+        lane_pair_store(&t->Phi[34], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[36]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[36]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][36]));
+        lane_pair_store(&t->Phi[36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[38]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[38]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][38]));
+        lane_pair_store(&t->Phi[38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[40]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[40]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][40]));
+        lane_pair_store(&t->Phi[40], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[42]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[42]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][42]));
+        lane_pair_store(&t->Phi[42], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[44]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[44]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][44]));
+        lane_pair_store(&t->Phi[44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[46]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[46]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][46]));
+        lane_pair_store(&t->Phi[46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[48]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[48]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][48]));
+        lane_pair_store(&t->Phi[48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[50]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[50]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][50]));
+        lane_pair_store(&t->Phi[50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[52]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[52]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][52]));
+        lane_pair_store(&t->Phi[52], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[54]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[54]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][54]));
+        lane_pair_store(&t->Phi[54], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[56]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[56]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][56]));
+        lane_pair_store(&t->Phi[56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[58]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[58]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][58]));
+        lane_pair_store(&t->Phi[58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[60]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[60]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][60]));
+        lane_pair_store(&t->Phi[60], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[62]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[62]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][62]));
+        lane_pair_store(&t->Phi[62], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[64]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[64]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][64]));
+        lane_pair_store(&t->Phi[64], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[66]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[66]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][66]));
+        lane_pair_store(&t->Phi[66], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[68]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[68]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][68]));
+        lane_pair_store(&t->Phi[68], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[70]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[70]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][70]));
+        lane_pair_store(&t->Phi[70], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[72]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[72]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][72]));
+        lane_pair_store(&t->Phi[72], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[74]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[74]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][74]));
+        lane_pair_store(&t->Phi[74], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[76]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[76]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][76]));
+        lane_pair_store(&t->Phi[76], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[78]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[78]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][78]));
+        lane_pair_store(&t->Phi[78], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[80]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[80]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][80]));
+        lane_pair_store(&t->Phi[80], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[82]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[82]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][82]));
+        lane_pair_store(&t->Phi[82], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[84]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[84]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][84]));
+        lane_pair_store(&t->Phi[84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[86]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[86]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][86]));
+        lane_pair_store(&t->Phi[86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[88]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[88]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][88]));
+        lane_pair_store(&t->Phi[88], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[90]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[90]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][90]));
+        lane_pair_store(&t->Phi[90], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[92]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[92]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][92]));
+        lane_pair_store(&t->Phi[92], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[94]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[94]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][94]));
+        lane_pair_store(&t->Phi[94], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[96]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[96]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][96]));
+        lane_pair_store(&t->Phi[96], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[98]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[98]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][98]));
+        lane_pair_store(&t->Phi[98], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[100]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[100]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][100]));
+        lane_pair_store(&t->Phi[100], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[102]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[102]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][102]));
+        lane_pair_store(&t->Phi[102], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[104]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[104]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][104]));
+        lane_pair_store(&t->Phi[104], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[106]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[106]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][106]));
+        lane_pair_store(&t->Phi[106], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[108]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[108]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][108]));
+        lane_pair_store(&t->Phi[108], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[110]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[110]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][110]));
+        lane_pair_store(&t->Phi[110], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[112]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[112]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][112]));
+        lane_pair_store(&t->Phi[112], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[114]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[114]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][114]));
+        lane_pair_store(&t->Phi[114], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[116]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[116]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][116]));
+        lane_pair_store(&t->Phi[116], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[118]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[118]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][118]));
+        lane_pair_store(&t->Phi[118], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[120]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[120]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][120]));
+        lane_pair_store(&t->Phi[120], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[122]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[122]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][122]));
+        lane_pair_store(&t->Phi[122], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[124]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[124]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][124]));
+        lane_pair_store(&t->Phi[124], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[126]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[126]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][126]));
+        lane_pair_store(&t->Phi[126], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[128]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[128]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][128]));
+        lane_pair_store(&t->Phi[128], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[130]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[130]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][130]));
+        lane_pair_store(&t->Phi[130], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[132]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[132]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][132]));
+        lane_pair_store(&t->Phi[132], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[134]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[134]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][134]));
+        lane_pair_store(&t->Phi[134], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[136]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[136]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][136]));
+        lane_pair_store(&t->Phi[136], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[138]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[138]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][138]));
+        lane_pair_store(&t->Phi[138], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[140]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[140]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][140]));
+        lane_pair_store(&t->Phi[140], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[142]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[142]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][142]));
+        lane_pair_store(&t->Phi[142], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[144]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[144]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][144]));
+        lane_pair_store(&t->Phi[144], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[146]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[146]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][146]));
+        lane_pair_store(&t->Phi[146], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[148]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[148]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][148]));
+        lane_pair_store(&t->Phi[148], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[150]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[150]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][150]));
+        lane_pair_store(&t->Phi[150], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[152]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[152]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][152]));
+        lane_pair_store(&t->Phi[152], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[154]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[154]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][154]));
+        lane_pair_store(&t->Phi[154], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[156]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[156]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][156]));
+        lane_pair_store(&t->Phi[156], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[158]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[158]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][158]));
+        lane_pair_store(&t->Phi[158], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[160]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[160]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][160]));
+        lane_pair_store(&t->Phi[160], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[162]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[162]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][162]));
+        lane_pair_store(&t->Phi[162], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[164]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[164]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][164]));
+        lane_pair_store(&t->Phi[164], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[166]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[166]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][166]));
+        lane_pair_store(&t->Phi[166], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[168]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[168]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][168]));
+        lane_pair_store(&t->Phi[168], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[170]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[170]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][170]));
+        lane_pair_store(&t->Phi[170], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[172]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[172]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][172]));
+        lane_pair_store(&t->Phi[172], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[174]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[174]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][174]));
+        lane_pair_store(&t->Phi[174], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[176]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[176]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][176]));
+        lane_pair_store(&t->Phi[176], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[178]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[178]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][178]));
+        lane_pair_store(&t->Phi[178], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[180]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[180]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][180]));
+        lane_pair_store(&t->Phi[180], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[182]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[182]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][182]));
+        lane_pair_store(&t->Phi[182], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[184]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[184]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][184]));
+        lane_pair_store(&t->Phi[184], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[186]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[186]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][186]));
+        lane_pair_store(&t->Phi[186], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[188]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[188]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][188]));
+        lane_pair_store(&t->Phi[188], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[190]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[190]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][190]));
+        lane_pair_store(&t->Phi[190], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[192]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[192]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][192]));
+        lane_pair_store(&t->Phi[192], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[194]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[194]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][194]));
+        lane_pair_store(&t->Phi[194], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[196]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[196]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][196]));
+        lane_pair_store(&t->Phi[196], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[198]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[198]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][198]));
+        lane_pair_store(&t->Phi[198], pair);
+    }
     t->Phi[200] = t->Phi[200] + t->Phi[200] + w->term[0][200];
-    w->S[0] = w->S[0] + half*w->term[1][0];
-    w->S[1] = w->S[1] + half*w->term[1][1];
-    w->S[2] = w->S[2] + half*w->term[1][2];
-    w->S[3] = w->S[3] + half*w->term[1][3];
-    w->S[4] = w->S[4] + half*w->term[1][4];
-    w->S[5] = w->S[5] + half*w->term[1][5];
-    w->S[6] = w->S[6] + half*w->term[1][6];
-    w->S[7] = w->S[7] + half*w->term[1][7];
-    w->S[8] = w->S[8] + half*w->term[1][8];
-    w->S[9] = w->S[9] + half*w->term[1][9];
-    w->S[10] = w->S[10] + half*w->term[1][10];
-    w->S[11] = w->S[11] + half*w->term[1][11];
-    w->S[12] = w->S[12] + half*w->term[1][12];
-    w->S[13] = w->S[13] + half*w->term[1][13];
-    w->S[14] = w->S[14] + half*w->term[1][14];
-    w->S[15] = w->S[15] + half*w->term[1][15];
-    w->S[16] = w->S[16] + half*w->term[1][16];
-    w->S[17] = w->S[17] + half*w->term[1][17];
-    w->S[18] = w->S[18] + half*w->term[1][18];
-    w->S[19] = w->S[19] + half*w->term[1][19];
+    {
+        lane_pair pair = lane_pair_load(&w->S[0]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][0]));
+        lane_pair_store(&w->S[0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[2]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][2]));
+        lane_pair_store(&w->S[2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[4]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][4]));
+        lane_pair_store(&w->S[4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[6]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][6]));
+        lane_pair_store(&w->S[6], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[8]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][8]));
+        lane_pair_store(&w->S[8], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[10]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][10]));
+        lane_pair_store(&w->S[10], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[12]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][12]));
+        lane_pair_store(&w->S[12], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[14]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][14]));
+        lane_pair_store(&w->S[14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[16]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][16]));
+        lane_pair_store(&w->S[16], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[18]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][18]));
+        lane_pair_store(&w->S[18], pair);
+    }
     w->S[20] = w->S[20] + half*w->term[1][20];
-    w->S[22] = w->S[22] + half*w->term[1][21];
-    w->S[23] = w->S[23] + half*w->term[1][22];
-    w->S[24] = w->S[24] + half*w->term[1][23];
-    w->S[25] = w->S[25] + half*w->term[1][24];
-    w->S[26] = w->S[26] + half*w->term[1][25];
-    w->S[27] = w->S[27] + half*w->term[1][26];
-    w->S[28] = w->S[28] + half*w->term[1][27];
-    w->S[29] = w->S[29] + half*w->term[1][28];
-    w->S[30] = w->S[30] + half*w->term[1][29];
-    w->S[31] = w->S[31] + half*w->term[1][30];
-    w->S[32] = w->S[32] + half*w->term[1][31];
-    w->S[33] = w->S[33] + half*w->term[1][32];
-    w->S[34] = w->S[34] + half*w->term[1][33];
-    w->S[35] = w->S[35] + half*w->term[1][34];
-    w->S[36] = w->S[36] + half*w->term[1][35];
-    w->S[37] = w->S[37] + half*w->term[1][36];
-    w->S[38] = w->S[38] + half*w->term[1][37];
-    w->S[39] = w->S[39] + half*w->term[1][38];
-    w->S[40] = w->S[40] + half*w->term[1][39];
-    w->S[41] = w->S[41] + half*w->term[1][40];
+    {
+        lane_pair pair = lane_pair_load(&w->S[22]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][21]));
+        lane_pair_store(&w->S[22], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[24]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][23]));
+        lane_pair_store(&w->S[24], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[26]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][25]));
+        lane_pair_store(&w->S[26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[28]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][27]));
+        lane_pair_store(&w->S[28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[30]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][29]));
+        lane_pair_store(&w->S[30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[32]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][31]));
+        lane_pair_store(&w->S[32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[34]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][33]));
+        lane_pair_store(&w->S[34], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[36]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][35]));
+        lane_pair_store(&w->S[36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[38]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][37]));
+        lane_pair_store(&w->S[38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[40]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][39]));
+        lane_pair_store(&w->S[40], pair);
+    }
     w->S[42] = w->S[42] + half*w->term[1][41];
-    w->S[44] = w->S[44] + half*w->term[1][42];
-    w->S[45] = w->S[45] + half*w->term[1][43];
-    w->S[46] = w->S[46] + half*w->term[1][44];
-    w->S[47] = w->S[47] + half*w->term[1][45];
-    w->S[48] = w->S[48] + half*w->term[1][46];
-    w->S[49] = w->S[49] + half*w->term[1][47];
-    w->S[50] = w->S[50] + half*w->term[1][48];
-    w->S[51] = w->S[51] + half*w->term[1][49];
-    w->S[52] = w->S[52] + half*w->term[1][50];
-    w->S[53] = w->S[53] + half*w->term[1][51];
-    w->S[54] = w->S[54] + half*w->term[1][52];
-    w->S[55] = w->S[55] + half*w->term[1][53];
-    w->S[56] = w->S[56] + half*w->term[1][54];
-    w->S[57] = w->S[57] + half*w->term[1][55];
-    w->S[58] = w->S[58] + half*w->term[1][56];
-    w->S[59] = w->S[59] + half*w->term[1][57];
-    w->S[60] = w->S[60] + half*w->term[1][58];
-    w->S[61] = w->S[61] + half*w->term[1][59];
-    w->S[62] = w->S[62] + half*w->term[1][60];
-    w->S[63] = w->S[63] + half*w->term[1][61];
+    {
+        lane_pair pair = lane_pair_load(&w->S[44]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][42]));
+        lane_pair_store(&w->S[44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[46]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][44]));
+        lane_pair_store(&w->S[46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[48]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][46]));
+        lane_pair_store(&w->S[48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[50]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][48]));
+        lane_pair_store(&w->S[50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[52]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][50]));
+        lane_pair_store(&w->S[52], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[54]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][52]));
+        lane_pair_store(&w->S[54], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[56]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][54]));
+        lane_pair_store(&w->S[56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[58]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][56]));
+        lane_pair_store(&w->S[58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[60]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][58]));
+        lane_pair_store(&w->S[60], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[62]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][60]));
+        lane_pair_store(&w->S[62], pair);
+    }
     w->S[64] = w->S[64] + half*w->term[1][62];
-    w->S[66] = w->S[66] + half*w->term[1][63];
-    w->S[67] = w->S[67] + half*w->term[1][64];
-    w->S[68] = w->S[68] + half*w->term[1][65];
-    w->S[69] = w->S[69] + half*w->term[1][66];
-    w->S[70] = w->S[70] + half*w->term[1][67];
-    w->S[71] = w->S[71] + half*w->term[1][68];
-    w->S[72] = w->S[72] + half*w->term[1][69];
-    w->S[73] = w->S[73] + half*w->term[1][70];
-    w->S[74] = w->S[74] + half*w->term[1][71];
-    w->S[75] = w->S[75] + half*w->term[1][72];
-    w->S[76] = w->S[76] + half*w->term[1][73];
-    w->S[77] = w->S[77] + half*w->term[1][74];
-    w->S[78] = w->S[78] + half*w->term[1][75];
-    w->S[79] = w->S[79] + half*w->term[1][76];
-    w->S[80] = w->S[80] + half*w->term[1][77];
-    w->S[81] = w->S[81] + half*w->term[1][78];
-    w->S[82] = w->S[82] + half*w->term[1][79];
-    w->S[83] = w->S[83] + half*w->term[1][80];
-    w->S[84] = w->S[84] + half*w->term[1][81];
-    w->S[85] = w->S[85] + half*w->term[1][82];
+    {
+        lane_pair pair = lane_pair_load(&w->S[66]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][63]));
+        lane_pair_store(&w->S[66], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[68]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][65]));
+        lane_pair_store(&w->S[68], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[70]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][67]));
+        lane_pair_store(&w->S[70], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[72]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][69]));
+        lane_pair_store(&w->S[72], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[74]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][71]));
+        lane_pair_store(&w->S[74], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[76]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][73]));
+        lane_pair_store(&w->S[76], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[78]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][75]));
+        lane_pair_store(&w->S[78], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[80]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][77]));
+        lane_pair_store(&w->S[80], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[82]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][79]));
+        lane_pair_store(&w->S[82], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[84]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][81]));
+        lane_pair_store(&w->S[84], pair);
+    }
     w->S[86] = w->S[86] + half*w->term[1][83];
-    w->S[88] = w->S[88] + half*w->term[1][84];
-    w->S[89] = w->S[89] + half*w->term[1][85];
-    w->S[90] = w->S[90] + half*w->term[1][86];
-    w->S[91] = w->S[91] + half*w->term[1][87];
-    w->S[92] = w->S[92] + half*w->term[1][88];
-    w->S[93] = w->S[93] + half*w->term[1][89];
-    w->S[94] = w->S[94] + half*w->term[1][90];
-    w->S[95] = w->S[95] + half*w->term[1][91];
-    w->S[96] = w->S[96] + half*w->term[1][92];
-    w->S[97] = w->S[97] + half*w->term[1][93];
-    w->S[98] = w->S[98] + half*w->term[1][94];
-    w->S[99] = w->S[99] + half*w->term[1][95];
-    w->S[100] = w->S[100] + half*w->term[1][96];
-    w->S[101] = w->S[101] + half*w->term[1][97];
-    w->S[102] = w->S[102] + half*w->term[1][98];
-    w->S[103] = w->S[103] + half*w->term[1][99];
-    w->S[104] = w->S[104] + half*w->term[1][100];
-    w->S[105] = w->S[105] + half*w->term[1][101];
-    w->S[106] = w->S[106] + half*w->term[1][102];
-    w->S[107] = w->S[107] + half*w->term[1][103];
+    {
+        lane_pair pair = lane_pair_load(&w->S[88]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][84]));
+        lane_pair_store(&w->S[88], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[90]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][86]));
+        lane_pair_store(&w->S[90], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[92]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][88]));
+        lane_pair_store(&w->S[92], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[94]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][90]));
+        lane_pair_store(&w->S[94], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[96]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][92]));
+        lane_pair_store(&w->S[96], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[98]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][94]));
+        lane_pair_store(&w->S[98], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[100]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][96]));
+        lane_pair_store(&w->S[100], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[102]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][98]));
+        lane_pair_store(&w->S[102], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[104]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][100]));
+        lane_pair_store(&w->S[104], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[106]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][102]));
+        lane_pair_store(&w->S[106], pair);
+    }
     w->S[108] = w->S[108] + half*w->term[1][104];
-    w->S[110] = w->S[110] + half*w->term[1][105];
-    w->S[111] = w->S[111] + half*w->term[1][106];
-    w->S[112] = w->S[112] + half*w->term[1][107];
-    w->S[113] = w->S[113] + half*w->term[1][108];
-    w->S[114] = w->S[114] + half*w->term[1][109];
-    w->S[115] = w->S[115] + half*w->term[1][110];
-    w->S[116] = w->S[116] + half*w->term[1][111];
-    w->S[117] = w->S[117] + half*w->term[1][112];
-    w->S[118] = w->S[118] + half*w->term[1][113];
-    w->S[119] = w->S[119] + half*w->term[1][114];
-    w->S[120] = w->S[120] + half*w->term[1][115];
-    w->S[121] = w->S[121] + half*w->term[1][116];
-    w->S[122] = w->S[122] + half*w->term[1][117];
-    w->S[123] = w->S[123] + half*w->term[1][118];
-    w->S[124] = w->S[124] + half*w->term[1][119];
-    w->S[125] = w->S[125] + half*w->term[1][120];
-    w->S[126] = w->S[126] + half*w->term[1][121];
-    w->S[127] = w->S[127] + half*w->term[1][122];
-    w->S[128] = w->S[128] + half*w->term[1][123];
-    w->S[129] = w->S[129] + half*w->term[1][124];
+    {
+        lane_pair pair = lane_pair_load(&w->S[110]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][105]));
+        lane_pair_store(&w->S[110], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[112]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][107]));
+        lane_pair_store(&w->S[112], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[114]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][109]));
+        lane_pair_store(&w->S[114], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[116]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][111]));
+        lane_pair_store(&w->S[116], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[118]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][113]));
+        lane_pair_store(&w->S[118], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[120]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][115]));
+        lane_pair_store(&w->S[120], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[122]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][117]));
+        lane_pair_store(&w->S[122], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[124]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][119]));
+        lane_pair_store(&w->S[124], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[126]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][121]));
+        lane_pair_store(&w->S[126], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[128]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][123]));
+        lane_pair_store(&w->S[128], pair);
+    }
     w->S[130] = w->S[130] + half*w->term[1][125];
-    w->S[132] = w->S[132] + half*w->term[1][126];
-    w->S[133] = w->S[133] + half*w->term[1][127];
-    w->S[134] = w->S[134] + half*w->term[1][128];
-    w->S[135] = w->S[135] + half*w->term[1][129];
-    w->S[136] = w->S[136] + half*w->term[1][130];
-    w->S[137] = w->S[137] + half*w->term[1][131];
-    w->S[138] = w->S[138] + half*w->term[1][132];
-    w->S[139] = w->S[139] + half*w->term[1][133];
-    w->S[140] = w->S[140] + half*w->term[1][134];
-    w->S[141] = w->S[141] + half*w->term[1][135];
-    w->S[142] = w->S[142] + half*w->term[1][136];
-    w->S[143] = w->S[143] + half*w->term[1][137];
-    w->S[144] = w->S[144] + half*w->term[1][138];
-    w->S[145] = w->S[145] + half*w->term[1][139];
-    w->S[146] = w->S[146] + half*w->term[1][140];
-    w->S[147] = w->S[147] + half*w->term[1][141];
-    w->S[148] = w->S[148] + half*w->term[1][142];
-    w->S[149] = w->S[149] + half*w->term[1][143];
-    w->S[150] = w->S[150] + half*w->term[1][144];
-    w->S[151] = w->S[151] + half*w->term[1][145];
+    {
+        lane_pair pair = lane_pair_load(&w->S[132]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][126]));
+        lane_pair_store(&w->S[132], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[134]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][128]));
+        lane_pair_store(&w->S[134], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[136]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][130]));
+        lane_pair_store(&w->S[136], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[138]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][132]));
+        lane_pair_store(&w->S[138], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[140]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][134]));
+        lane_pair_store(&w->S[140], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[142]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][136]));
+        lane_pair_store(&w->S[142], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[144]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][138]));
+        lane_pair_store(&w->S[144], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[146]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][140]));
+        lane_pair_store(&w->S[146], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[148]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][142]));
+        lane_pair_store(&w->S[148], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[150]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][144]));
+        lane_pair_store(&w->S[150], pair);
+    }
     w->S[152] = w->S[152] + half*w->term[1][146];
-    w->S[154] = w->S[154] + half*w->term[1][147];
-    w->S[155] = w->S[155] + half*w->term[1][148];
-    w->S[156] = w->S[156] + half*w->term[1][149];
-    w->S[157] = w->S[157] + half*w->term[1][150];
-    w->S[158] = w->S[158] + half*w->term[1][151];
-    w->S[159] = w->S[159] + half*w->term[1][152];
-    w->S[160] = w->S[160] + half*w->term[1][153];
-    w->S[161] = w->S[161] + half*w->term[1][154];
-    w->S[162] = w->S[162] + half*w->term[1][155];
-    w->S[163] = w->S[163] + half*w->term[1][156];
-    w->S[164] = w->S[164] + half*w->term[1][157];
-    w->S[165] = w->S[165] + half*w->term[1][158];
-    w->S[166] = w->S[166] + half*w->term[1][159];
-    w->S[167] = w->S[167] + half*w->term[1][160];
-    w->S[168] = w->S[168] + half*w->term[1][161];
-    w->S[169] = w->S[169] + half*w->term[1][162];
-    w->S[170] = w->S[170] + half*w->term[1][163];
-    w->S[171] = w->S[171] + half*w->term[1][164];
-    w->S[172] = w->S[172] + half*w->term[1][165];
-    w->S[173] = w->S[173] + half*w->term[1][166];
+    {
+        lane_pair pair = lane_pair_load(&w->S[154]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][147]));
+        lane_pair_store(&w->S[154], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[156]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][149]));
+        lane_pair_store(&w->S[156], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[158]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][151]));
+        lane_pair_store(&w->S[158], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[160]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][153]));
+        lane_pair_store(&w->S[160], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[162]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][155]));
+        lane_pair_store(&w->S[162], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[164]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][157]));
+        lane_pair_store(&w->S[164], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[166]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][159]));
+        lane_pair_store(&w->S[166], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[168]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][161]));
+        lane_pair_store(&w->S[168], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[170]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][163]));
+        lane_pair_store(&w->S[170], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[172]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][165]));
+        lane_pair_store(&w->S[172], pair);
+    }
     w->S[174] = w->S[174] + half*w->term[1][167];
-    w->S[176] = w->S[176] + half*w->term[1][168];
-    w->S[177] = w->S[177] + half*w->term[1][169];
-    w->S[178] = w->S[178] + half*w->term[1][170];
-    w->S[179] = w->S[179] + half*w->term[1][171];
-    w->S[180] = w->S[180] + half*w->term[1][172];
-    w->S[181] = w->S[181] + half*w->term[1][173];
-    w->S[182] = w->S[182] + half*w->term[1][174];
-    w->S[183] = w->S[183] + half*w->term[1][175];
-    w->S[184] = w->S[184] + half*w->term[1][176];
-    w->S[185] = w->S[185] + half*w->term[1][177];
-    w->S[186] = w->S[186] + half*w->term[1][178];
-    w->S[187] = w->S[187] + half*w->term[1][179];
-    w->S[188] = w->S[188] + half*w->term[1][180];
-    w->S[189] = w->S[189] + half*w->term[1][181];
-    w->S[190] = w->S[190] + half*w->term[1][182];
-    w->S[191] = w->S[191] + half*w->term[1][183];
-    w->S[192] = w->S[192] + half*w->term[1][184];
-    w->S[193] = w->S[193] + half*w->term[1][185];
-    w->S[194] = w->S[194] + half*w->term[1][186];
-    w->S[195] = w->S[195] + half*w->term[1][187];
+    {
+        lane_pair pair = lane_pair_load(&w->S[176]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][168]));
+        lane_pair_store(&w->S[176], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[178]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][170]));
+        lane_pair_store(&w->S[178], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[180]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][172]));
+        lane_pair_store(&w->S[180], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[182]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][174]));
+        lane_pair_store(&w->S[182], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[184]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][176]));
+        lane_pair_store(&w->S[184], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[186]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][178]));
+        lane_pair_store(&w->S[186], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[188]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][180]));
+        lane_pair_store(&w->S[188], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[190]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][182]));
+        lane_pair_store(&w->S[190], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[192]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][184]));
+        lane_pair_store(&w->S[192], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[194]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][186]));
+        lane_pair_store(&w->S[194], pair);
+    }
     w->S[196] = w->S[196] + half*w->term[1][188];
-    w->S[198] = w->S[198] + half*w->term[1][189];
-    w->S[199] = w->S[199] + half*w->term[1][190];
-    w->S[200] = w->S[200] + half*w->term[1][191];
-    w->S[201] = w->S[201] + half*w->term[1][192];
-    w->S[202] = w->S[202] + half*w->term[1][193];
-    w->S[203] = w->S[203] + half*w->term[1][194];
-    w->S[204] = w->S[204] + half*w->term[1][195];
-    w->S[205] = w->S[205] + half*w->term[1][196];
-    w->S[206] = w->S[206] + half*w->term[1][197];
-    w->S[207] = w->S[207] + half*w->term[1][198];
-    w->S[208] = w->S[208] + half*w->term[1][199];
-    w->S[209] = w->S[209] + half*w->term[1][200];
+    {
+        lane_pair pair = lane_pair_load(&w->S[198]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][189]));
+        lane_pair_store(&w->S[198], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[200]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][191]));
+        lane_pair_store(&w->S[200], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[202]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][193]));
+        lane_pair_store(&w->S[202], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[204]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][195]));
+        lane_pair_store(&w->S[204], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[206]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][197]));
+        lane_pair_store(&w->S[206], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[208]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][199]));
+        lane_pair_store(&w->S[208], pair);
+    }
 }
 
 INS_GNSS21_BLOCK ins_gnss21_scalar transition_check(ins_gnss21_transition *restrict t,
@@ -2556,18 +4071,36 @@ INS_GNSS21_BLOCK ins_gnss21_scalar transition_check(ins_gnss21_transition *restr
     t->Phi[132] = t->Phi[132] + one;
     t->Phi[154] = t->Phi[154] + one;
     t->Phi[176] = t->Phi[176] + one;
-    t->Phi[189] = t->Phi[189] + one;
-    t->Phi[190] = t->Phi[190] + one;
-    t->Phi[191] = t->Phi[191] + one;
-    t->Phi[192] = t->Phi[192] + one;
-    t->Phi[193] = t->Phi[193] + one;
-    t->Phi[194] = t->Phi[194] + one;
-    t->Phi[195] = t->Phi[195] + one;
-    t->Phi[196] = t->Phi[196] + one;
-    t->Phi[197] = t->Phi[197] + one;
-    t->Phi[198] = t->Phi[198] + one;
-    t->Phi[199] = t->Phi[199] + one;
-    t->Phi[200] = t->Phi[200] + one;
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[189]);
+        pair = lane_pair_add(pair, lane_pair_of(one, one));
+        lane_pair_store(&t->Phi[189], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[191]);
+        pair = lane_pair_add(pair, lane_pair_of(one, one));
+        lane_pair_store(&t->Phi[191], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[193]);
+        pair = lane_pair_add(pair, lane_pair_of(one, one));
+        lane_pair_store(&t->Phi[193], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[195]);
+        pair = lane_pair_add(pair, lane_pair_of(one, one));
+        lane_pair_store(&t->Phi[195], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[197]);
+        pair = lane_pair_add(pair, lane_pair_of(one, one));
+        lane_pair_store(&t->Phi[197], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[199]);
+        pair = lane_pair_add(pair, lane_pair_of(one, one));
+        lane_pair_store(&t->Phi[199], pair);
+    }
     v = t->Phi[0] + t->Phi[1] + t->Phi[2] + t->Phi[3] + t->Phi[4] + t->Phi[5] + t->Phi[6] +
             t->Phi[7] + t->Phi[8] + t->Phi[9] + t->Phi[10] + t->Phi[11] + t->Phi[12] + t->Phi[13] +
             t->Phi[14] + t->Phi[15] + t->Phi[16] + t->Phi[17] + t->Phi[18] + t->Phi[19] + t->Phi[20]
@@ -2627,18 +4160,30 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
         lane_pair_store(&w->term[0][3], pair);
     }
     w->term[0][5] = w->S[3]*m->G[2] + w->S[4]*m->G[5] + w->S[5]*m->G[8];
-    w->term[0][6] = w->S[9]*m->G[18];
-    w->term[0][7] = w->S[10]*m->G[19];
-    w->term[0][8] = w->S[11]*m->G[20];
-    w->term[0][9] = w->S[12]*m->G[21];
-    w->term[0][10] = w->S[13]*m->G[22];
-    w->term[0][11] = w->S[14]*m->G[23];
-    w->term[0][12] = w->S[15]*m->G[24];
-    w->term[0][13] = w->S[16]*m->G[25];
-    w->term[0][14] = w->S[17]*m->G[26];
-    w->term[0][15] = w->S[18]*m->G[27];
-    w->term[0][16] = w->S[19]*m->G[28];
-    w->term[0][17] = w->S[20]*m->G[29];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[9]), lane_pair_load(&m->G[18]));
+        lane_pair_store(&w->term[0][6], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[11]), lane_pair_load(&m->G[20]));
+        lane_pair_store(&w->term[0][8], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[13]), lane_pair_load(&m->G[22]));
+        lane_pair_store(&w->term[0][10], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[15]), lane_pair_load(&m->G[24]));
+        lane_pair_store(&w->term[0][12], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[17]), lane_pair_load(&m->G[26]));
+        lane_pair_store(&w->term[0][14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[19]), lane_pair_load(&m->G[28]));
+        lane_pair_store(&w->term[0][16], pair);
+    }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[28], w->S[28]),
                 lane_pair_load(&m->G[9]));
@@ -2659,18 +4204,30 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
         lane_pair_store(&w->term[0][21], pair);
     }
     w->term[0][23] = w->S[25]*m->G[2] + w->S[26]*m->G[5] + w->S[27]*m->G[8];
-    w->term[0][24] = w->S[31]*m->G[18];
-    w->term[0][25] = w->S[32]*m->G[19];
-    w->term[0][26] = w->S[33]*m->G[20];
-    w->term[0][27] = w->S[34]*m->G[21];
-    w->term[0][28] = w->S[35]*m->G[22];
-    w->term[0][29] = w->S[36]*m->G[23];
-    w->term[0][30] = w->S[37]*m->G[24];
-    w->term[0][31] = w->S[38]*m->G[25];
-    w->term[0][32] = w->S[39]*m->G[26];
-    w->term[0][33] = w->S[40]*m->G[27];
-    w->term[0][34] = w->S[41]*m->G[28];
-    w->term[0][35] = w->S[42]*m->G[29];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[31]), lane_pair_load(&m->G[18]));
+        lane_pair_store(&w->term[0][24], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[33]), lane_pair_load(&m->G[20]));
+        lane_pair_store(&w->term[0][26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[35]), lane_pair_load(&m->G[22]));
+        lane_pair_store(&w->term[0][28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[37]), lane_pair_load(&m->G[24]));
+        lane_pair_store(&w->term[0][30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[39]), lane_pair_load(&m->G[26]));
+        lane_pair_store(&w->term[0][32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[41]), lane_pair_load(&m->G[28]));
+        lane_pair_store(&w->term[0][34], pair);
+    }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[50], w->S[50]),
                 lane_pair_load(&m->G[9]));
@@ -2691,18 +4248,30 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
         lane_pair_store(&w->term[0][39], pair);
     }
     w->term[0][41] = w->S[47]*m->G[2] + w->S[48]*m->G[5] + w->S[49]*m->G[8];
-    w->term[0][42] = w->S[53]*m->G[18];
-    w->term[0][43] = w->S[54]*m->G[19];
-    w->term[0][44] = w->S[55]*m->G[20];
-    w->term[0][45] = w->S[56]*m->G[21];
-    w->term[0][46] = w->S[57]*m->G[22];
-    w->term[0][47] = w->S[58]*m->G[23];
-    w->term[0][48] = w->S[59]*m->G[24];
-    w->term[0][49] = w->S[60]*m->G[25];
-    w->term[0][50] = w->S[61]*m->G[26];
-    w->term[0][51] = w->S[62]*m->G[27];
-    w->term[0][52] = w->S[63]*m->G[28];
-    w->term[0][53] = w->S[64]*m->G[29];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[53]), lane_pair_load(&m->G[18]));
+        lane_pair_store(&w->term[0][42], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[55]), lane_pair_load(&m->G[20]));
+        lane_pair_store(&w->term[0][44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[57]), lane_pair_load(&m->G[22]));
+        lane_pair_store(&w->term[0][46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[59]), lane_pair_load(&m->G[24]));
+        lane_pair_store(&w->term[0][48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[61]), lane_pair_load(&m->G[26]));
+        lane_pair_store(&w->term[0][50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[63]), lane_pair_load(&m->G[28]));
+        lane_pair_store(&w->term[0][52], pair);
+    }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
                 lane_pair_load(&m->G[9]));
@@ -2723,18 +4292,30 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
         lane_pair_store(&w->term[0][57], pair);
     }
     w->term[0][59] = w->S[69]*m->G[2] + w->S[70]*m->G[5] + w->S[71]*m->G[8];
-    w->term[0][60] = w->S[75]*m->G[18];
-    w->term[0][61] = w->S[76]*m->G[19];
-    w->term[0][62] = w->S[77]*m->G[20];
-    w->term[0][63] = w->S[78]*m->G[21];
-    w->term[0][64] = w->S[79]*m->G[22];
-    w->term[0][65] = w->S[80]*m->G[23];
-    w->term[0][66] = w->S[81]*m->G[24];
-    w->term[0][67] = w->S[82]*m->G[25];
-    w->term[0][68] = w->S[83]*m->G[26];
-    w->term[0][69] = w->S[84]*m->G[27];
-    w->term[0][70] = w->S[85]*m->G[28];
-    w->term[0][71] = w->S[86]*m->G[29];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[75]), lane_pair_load(&m->G[18]));
+        lane_pair_store(&w->term[0][60], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[77]), lane_pair_load(&m->G[20]));
+        lane_pair_store(&w->term[0][62], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[79]), lane_pair_load(&m->G[22]));
+        lane_pair_store(&w->term[0][64], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[81]), lane_pair_load(&m->G[24]));
+        lane_pair_store(&w->term[0][66], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[83]), lane_pair_load(&m->G[26]));
+        lane_pair_store(&w->term[0][68], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[85]), lane_pair_load(&m->G[28]));
+        lane_pair_store(&w->term[0][70], pair);
+    }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[94], w->S[94]),
                 lane_pair_load(&m->G[9]));
@@ -2755,18 +4336,30 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
         lane_pair_store(&w->term[0][75], pair);
     }
     w->term[0][77] = w->S[91]*m->G[2] + w->S[92]*m->G[5] + w->S[93]*m->G[8];
-    w->term[0][78] = w->S[97]*m->G[18];
-    w->term[0][79] = w->S[98]*m->G[19];
-    w->term[0][80] = w->S[99]*m->G[20];
-    w->term[0][81] = w->S[100]*m->G[21];
-    w->term[0][82] = w->S[101]*m->G[22];
-    w->term[0][83] = w->S[102]*m->G[23];
-    w->term[0][84] = w->S[103]*m->G[24];
-    w->term[0][85] = w->S[104]*m->G[25];
-    w->term[0][86] = w->S[105]*m->G[26];
-    w->term[0][87] = w->S[106]*m->G[27];
-    w->term[0][88] = w->S[107]*m->G[28];
-    w->term[0][89] = w->S[108]*m->G[29];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[97]), lane_pair_load(&m->G[18]));
+        lane_pair_store(&w->term[0][78], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[99]), lane_pair_load(&m->G[20]));
+        lane_pair_store(&w->term[0][80], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[101]), lane_pair_load(&m->G[22]));
+        lane_pair_store(&w->term[0][82], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[103]), lane_pair_load(&m->G[24]));
+        lane_pair_store(&w->term[0][84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[105]), lane_pair_load(&m->G[26]));
+        lane_pair_store(&w->term[0][86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[107]), lane_pair_load(&m->G[28]));
+        lane_pair_store(&w->term[0][88], pair);
+    }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[116], w->S[116]),
                 lane_pair_load(&m->G[9]));
@@ -2787,18 +4380,30 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
         lane_pair_store(&w->term[0][93], pair);
     }
     w->term[0][95] = w->S[113]*m->G[2] + w->S[114]*m->G[5] + w->S[115]*m->G[8];
-    w->term[0][96] = w->S[119]*m->G[18];
-    w->term[0][97] = w->S[120]*m->G[19];
-    w->term[0][98] = w->S[121]*m->G[20];
-    w->term[0][99] = w->S[122]*m->G[21];
-    w->term[0][100] = w->S[123]*m->G[22];
-    w->term[0][101] = w->S[124]*m->G[23];
-    w->term[0][102] = w->S[125]*m->G[24];
-    w->term[0][103] = w->S[126]*m->G[25];
-    w->term[0][104] = w->S[127]*m->G[26];
-    w->term[0][105] = w->S[128]*m->G[27];
-    w->term[0][106] = w->S[129]*m->G[28];
-    w->term[0][107] = w->S[130]*m->G[29];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[119]), lane_pair_load(&m->G[18]));
+        lane_pair_store(&w->term[0][96], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[121]), lane_pair_load(&m->G[20]));
+        lane_pair_store(&w->term[0][98], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[123]), lane_pair_load(&m->G[22]));
+        lane_pair_store(&w->term[0][100], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[125]), lane_pair_load(&m->G[24]));
+        lane_pair_store(&w->term[0][102], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[127]), lane_pair_load(&m->G[26]));
+        lane_pair_store(&w->term[0][104], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[129]), lane_pair_load(&m->G[28]));
+        lane_pair_store(&w->term[0][106], pair);
+    }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[138], w->S[138]),
                 lane_pair_load(&m->G[9]));
@@ -2819,18 +4424,30 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
         lane_pair_store(&w->term[0][111], pair);
     }
     w->term[0][113] = w->S[135]*m->G[2] + w->S[136]*m->G[5] + w->S[137]*m->G[8];
-    w->term[0][114] = w->S[141]*m->G[18];
-    w->term[0][115] = w->S[142]*m->G[19];
-    w->term[0][116] = w->S[143]*m->G[20];
-    w->term[0][117] = w->S[144]*m->G[21];
-    w->term[0][118] = w->S[145]*m->G[22];
-    w->term[0][119] = w->S[146]*m->G[23];
-    w->term[0][120] = w->S[147]*m->G[24];
-    w->term[0][121] = w->S[148]*m->G[25];
-    w->term[0][122] = w->S[149]*m->G[26];
-    w->term[0][123] = w->S[150]*m->G[27];
-    w->term[0][124] = w->S[151]*m->G[28];
-    w->term[0][125] = w->S[152]*m->G[29];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[141]), lane_pair_load(&m->G[18]));
+        lane_pair_store(&w->term[0][114], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[143]), lane_pair_load(&m->G[20]));
+        lane_pair_store(&w->term[0][116], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[145]), lane_pair_load(&m->G[22]));
+        lane_pair_store(&w->term[0][118], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[147]), lane_pair_load(&m->G[24]));
+        lane_pair_store(&w->term[0][120], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[149]), lane_pair_load(&m->G[26]));
+        lane_pair_store(&w->term[0][122], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[151]), lane_pair_load(&m->G[28]));
+        lane_pair_store(&w->term[0][124], pair);
+    }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[160], w->S[160]),
                 lane_pair_load(&m->G[9]));
@@ -2851,18 +4468,30 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
         lane_pair_store(&w->term[0][129], pair);
     }
     w->term[0][131] = w->S[157]*m->G[2] + w->S[158]*m->G[5] + w->S[159]*m->G[8];
-    w->term[0][132] = w->S[163]*m->G[18];
-    w->term[0][133] = w->S[164]*m->G[19];
-    w->term[0][134] = w->S[165]*m->G[20];
-    w->term[0][135] = w->S[166]*m->G[21];
-    w->term[0][136] = w->S[167]*m->G[22];
-    w->term[0][137] = w->S[168]*m->G[23];
-    w->term[0][138] = w->S[169]*m->G[24];
-    w->term[0][139] = w->S[170]*m->G[25];
-    w->term[0][140] = w->S[171]*m->G[26];
-    w->term[0][141] = w->S[172]*m->G[27];
-    w->term[0][142] = w->S[173]*m->G[28];
-    w->term[0][143] = w->S[174]*m->G[29];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[163]), lane_pair_load(&m->G[18]));
+        lane_pair_store(&w->term[0][132], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[165]), lane_pair_load(&m->G[20]));
+        lane_pair_store(&w->term[0][134], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[167]), lane_pair_load(&m->G[22]));
+        lane_pair_store(&w->term[0][136], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[169]), lane_pair_load(&m->G[24]));
+        lane_pair_store(&w->term[0][138], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[171]), lane_pair_load(&m->G[26]));
+        lane_pair_store(&w->term[0][140], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[173]), lane_pair_load(&m->G[28]));
+        lane_pair_store(&w->term[0][142], pair);
+    }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[182], w->S[182]),
                 lane_pair_load(&m->G[9]));
@@ -2883,30 +4512,54 @@ INS_GNSS21_BLOCK void noise_input(const ins_gnss21_matrices *restrict m,
         lane_pair_store(&w->term[0][147], pair);
     }
     w->term[0][149] = w->S[179]*m->G[2] + w->S[180]*m->G[5] + w->S[181]*m->G[8];
-    w->term[0][150] = w->S[185]*m->G[18];
-    w->term[0][151] = w->S[186]*m->G[19];
-    w->term[0][152] = w->S[187]*m->G[20];
-    w->term[0][153] = w->S[188]*m->G[21];
-    w->term[0][154] = w->S[189]*m->G[22];
-    w->term[0][155] = w->S[190]*m->G[23];
-    w->term[0][156] = w->S[191]*m->G[24];
-    w->term[0][157] = w->S[192]*m->G[25];
-    w->term[0][158] = w->S[193]*m->G[26];
-    w->term[0][159] = w->S[194]*m->G[27];
-    w->term[0][160] = w->S[195]*m->G[28];
-    w->term[0][161] = w->S[196]*m->G[29];
-    w->term[0][162] = w->S[198]*m->G[18];
-    w->term[0][163] = w->S[199]*m->G[19];
-    w->term[0][164] = w->S[200]*m->G[20];
-    w->term[0][165] = w->S[201]*m->G[21];
-    w->term[0][166] = w->S[202]*m->G[22];
-    w->term[0][167] = w->S[203]*m->G[23];
-    w->term[0][168] = w->S[204]*m->G[24];
-    w->term[0][169] = w->S[205]*m->G[25];
-    w->term[0][170] = w->S[206]*m->G[26];
-    w->term[0][171] = w->S[207]*m->G[27];
-    w->term[0][172] = w->S[208]*m->G[28];
-    w->term[0][173] = w->S[209]*m->G[29];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[185]), lane_pair_load(&m->G[18]));
+        lane_pair_store(&w->term[0][150], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[187]), lane_pair_load(&m->G[20]));
+        lane_pair_store(&w->term[0][152], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[189]), lane_pair_load(&m->G[22]));
+        lane_pair_store(&w->term[0][154], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[191]), lane_pair_load(&m->G[24]));
+        lane_pair_store(&w->term[0][156], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[193]), lane_pair_load(&m->G[26]));
+        lane_pair_store(&w->term[0][158], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[195]), lane_pair_load(&m->G[28]));
+        lane_pair_store(&w->term[0][160], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[198]), lane_pair_load(&m->G[18]));
+        lane_pair_store(&w->term[0][162], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[200]), lane_pair_load(&m->G[20]));
+        lane_pair_store(&w->term[0][164], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[202]), lane_pair_load(&m->G[22]));
+        lane_pair_store(&w->term[0][166], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[204]), lane_pair_load(&m->G[24]));
+        lane_pair_store(&w->term[0][168], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[206]), lane_pair_load(&m->G[26]));
+        lane_pair_store(&w->term[0][170], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[208]), lane_pair_load(&m->G[28]));
+        lane_pair_store(&w->term[0][172], pair);
+    }
 }
 
 INS_GNSS21_BLOCK void process_noise(const ins_gnss21_matrices *restrict m, ins_gnss21_transition
@@ -3122,71 +4775,41 @@ INS_GNSS21_BLOCK void process_noise(const ins_gnss21_matrices *restrict m, ins_g
     w->term[1][171] = w->term[0][171]*w->term[1][189];
     w->term[1][172] = w->term[0][172]*w->term[1][190];
     w->term[1][173] = w->term[0][173]*w->term[1][191];
-    t->Qd[154] = 0;
-    t->Qd[155] = 0;
-    t->Qd[156] = 0;
-    t->Qd[157] = 0;
-    t->Qd[158] = 0;
-    t->Qd[159] = 0;
-    t->Qd[160] = 0;
-    t->Qd[161] = 0;
-    t->Qd[162] = 0;
-    t->Qd[163] = 0;
+    lane_pair_store(&t->Qd[154], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[156], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[158], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[160], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[162], lane_pair_of(0, 0));
     t->Qd[164] = 0;
-    t->Qd[166] = 0;
-    t->Qd[167] = 0;
-    t->Qd[168] = 0;
-    t->Qd[169] = 0;
-    t->Qd[170] = 0;
-    t->Qd[171] = 0;
-    t->Qd[172] = 0;
-    t->Qd[173] = 0;
-    t->Qd[174] = 0;
-    t->Qd[175] = 0;
-    t->Qd[177] = 0;
-    t->Qd[178] = 0;
-    t->Qd[179] = 0;
-    t->Qd[180] = 0;
-    t->Qd[181] = 0;
-    t->Qd[182] = 0;
-    t->Qd[183] = 0;
-    t->Qd[184] = 0;
+    lane_pair_store(&t->Qd[166], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[168], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[170], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[172], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[174], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[177], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[179], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[181], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[183], lane_pair_of(0, 0));
     t->Qd[185] = 0;
-    t->Qd[187] = 0;
-    t->Qd[188] = 0;
-    t->Qd[189] = 0;
-    t->Qd[190] = 0;
-    t->Qd[191] = 0;
-    t->Qd[192] = 0;
-    t->Qd[193] = 0;
-    t->Qd[194] = 0;
-    t->Qd[196] = 0;
-    t->Qd[197] = 0;
-    t->Qd[198] = 0;
-    t->Qd[199] = 0;
-    t->Qd[200] = 0;
-    t->Qd[201] = 0;
+    lane_pair_store(&t->Qd[187], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[189], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[191], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[193], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[196], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[198], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[200], lane_pair_of(0, 0));
     t->Qd[202] = 0;
-    t->Qd[204] = 0;
-    t->Qd[205] = 0;
-    t->Qd[206] = 0;
-    t->Qd[207] = 0;
-    t->Qd[208] = 0;
-    t->Qd[209] = 0;
-    t->Qd[211] = 0;
-    t->Qd[212] = 0;
-    t->Qd[213] = 0;
-    t->Qd[214] = 0;
+    lane_pair_store(&t->Qd[204], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[206], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[208], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[211], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[213], lane_pair_of(0, 0));
     t->Qd[215] = 0;
-    t->Qd[217] = 0;
-    t->Qd[218] = 0;
-    t->Qd[219] = 0;
-    t->Qd[220] = 0;
-    t->Qd[222] = 0;
-    t->Qd[223] = 0;
+    lane_pair_store(&t->Qd[217], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[219], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[222], lane_pair_of(0, 0));
     t->Qd[224] = 0;
-    t->Qd[226] = 0;
-    t->Qd[227] = 0;
+    lane_pair_store(&t->Qd[226], lane_pair_of(0, 0));
     t->Qd[229] = 0;
 }
 

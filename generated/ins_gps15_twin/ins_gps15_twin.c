@@ -415,40 +415,72 @@ static const signed char balance_exponent[INS_GPS15_TWIN_N_STATES] = { -6, -8, -
    power of two.  A plan on it that needs a doubling is retaken on rebalanced_norm. */
 static ins_gps15_twin_scalar balanced_norm(const ins_gps15_twin_matrices *restrict m)
 {
-    ins_gps15_twin_scalar v, norm = 0.0;
-    v = fabs(m->F[0]) * 0.25 + fabs(m->F[1]) * 2.0 + fabs(m->F[2]) * 4096.0 + fabs(m->F[3]) *
-            65536.0 + fabs(m->F[4]) * 5.820766091346741e-11 + fabs(m->F[5]) * 5.820766091346741e-11
-            + fabs(m->F[6]) * 5.820766091346741e-11;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[7]) * 4.0 + fabs(m->F[8]) * 8.0 + fabs(m->F[9]) * 4096.0 + fabs(m->F[10]) * 8.0 +
-            fabs(m->F[11]) * 262144.0 + fabs(m->F[12]) * 2.3283064365386963e-10 + fabs(m->F[13]) *
-            2.3283064365386963e-10 + fabs(m->F[14]) * 2.3283064365386963e-10;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[15]) * 0.5 + fabs(m->F[16]) * 0.125 + fabs(m->F[17]) * 512.0 + fabs(m->F[18]) +
-            fabs(m->F[19]) * 32768.0 + fabs(m->F[20]) * 2.9103830456733704e-11 + fabs(m->F[21]) *
-            2.9103830456733704e-11 + fabs(m->F[22]) * 2.9103830456733704e-11;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[23]) * 0.000244140625 + fabs(m->F[24]) * 0.001953125 + fabs(m->F[25]) +
-            fabs(m->F[26]) * 4.0 + fabs(m->F[27]) * 0.25 + fabs(m->F[28]) * 0.001953125 +
-            fabs(m->F[29]) * 64.0 + fabs(m->F[30]) * 5.684341886080802e-14 + fabs(m->F[31]) *
-            5.684341886080802e-14 + fabs(m->F[32]) * 5.684341886080802e-14;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[33]) * 0.000244140625 + fabs(m->F[34]) * 0.00048828125 + fabs(m->F[35]) * 0.25 +
-            fabs(m->F[36]) + fabs(m->F[37]) * 0.0625 + fabs(m->F[38]) * 0.00048828125 +
-            fabs(m->F[39]) * 16.0 + fabs(m->F[40]) * 1.4210854715202004e-14 + fabs(m->F[41]) *
-            1.4210854715202004e-14 + fabs(m->F[42]) * 1.4210854715202004e-14;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[43]) * 0.00390625 + fabs(m->F[44]) * 0.0009765625 + fabs(m->F[45]) * 4.0 +
-            fabs(m->F[46]) * 16.0 + fabs(m->F[47]) * 0.0078125 + fabs(m->F[48]) * 256.0 +
-            fabs(m->F[49]) * 2.2737367544323206e-13 + fabs(m->F[50]) * 2.2737367544323206e-13 +
-            fabs(m->F[51]) * 2.2737367544323206e-13;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[52]) * 2048.0 + fabs(m->F[53]) * 32768.0;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[54]) * 1.4551915228366852e-11 + fabs(m->F[55]) * 2.842170943040401e-14 +
-            fabs(m->F[56]) * 9.313225746154785e-10;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[57]) * 0.00390625;
+    ins_gps15_twin_scalar norm = 0.0;
+    lane_pair lanes;
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[23]), fabs(m->F[33])),
+            lane_pair_of(0.000244140625, 0.000244140625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[24]), fabs(m->F[34])),
+            lane_pair_of(0.001953125, 0.00048828125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[25]), fabs(m->F[35])),
+            lane_pair_of(1.0, 0.25));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[26]), fabs(m->F[36])),
+            lane_pair_of(4.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[27]), fabs(m->F[37])),
+            lane_pair_of(0.25, 0.0625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[28]), fabs(m->F[38])),
+            lane_pair_of(0.001953125, 0.00048828125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[29]), fabs(m->F[39])),
+            lane_pair_of(64.0, 16.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[30]), fabs(m->F[40])),
+            lane_pair_of(5.684341886080802e-14, 1.4210854715202004e-14));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[31]), fabs(m->F[41])),
+            lane_pair_of(5.684341886080802e-14, 1.4210854715202004e-14));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[32]), fabs(m->F[42])),
+            lane_pair_of(5.684341886080802e-14, 1.4210854715202004e-14));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[43]), fabs(m->F[7])), lane_pair_of(0.00390625,
+            4.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[44]), fabs(m->F[8])),
+            lane_pair_of(0.0009765625, 8.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[45]), fabs(m->F[9])),
+            lane_pair_of(4.0, 4096.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[46]), fabs(m->F[10])),
+            lane_pair_of(16.0, 8.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[47]), fabs(m->F[11])),
+            lane_pair_of(0.0078125, 262144.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[48]), fabs(m->F[12])),
+            lane_pair_of(256.0, 2.3283064365386963e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[49]), fabs(m->F[13])),
+            lane_pair_of(2.2737367544323206e-13, 2.3283064365386963e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[50]), fabs(m->F[14])),
+            lane_pair_of(2.2737367544323206e-13, 2.3283064365386963e-10));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[51]), 0.0),
+            lane_pair_of(2.2737367544323206e-13, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[15]), fabs(m->F[0])), lane_pair_of(0.5, 0.25));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[16]), fabs(m->F[1])),
+            lane_pair_of(0.125, 2.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[17]), fabs(m->F[2])),
+            lane_pair_of(512.0, 4096.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[18]), fabs(m->F[3])),
+            lane_pair_of(1.0, 65536.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[19]), fabs(m->F[4])),
+            lane_pair_of(32768.0, 5.820766091346741e-11));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[20]), fabs(m->F[5])),
+            lane_pair_of(2.9103830456733704e-11, 5.820766091346741e-11));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[21]), fabs(m->F[6])),
+            lane_pair_of(2.9103830456733704e-11, 5.820766091346741e-11));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[22]), 0.0),
+            lane_pair_of(2.9103830456733704e-11, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[54]), fabs(m->F[52])),
+            lane_pair_of(1.4551915228366852e-11, 2048.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[55]), fabs(m->F[53])),
+            lane_pair_of(2.842170943040401e-14, 32768.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[56]), 0.0),
+            lane_pair_of(9.313225746154785e-10, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    const ins_gps15_twin_scalar v = fabs(m->F[57]) * 0.00390625;
     norm = v > norm ? v : norm;
     return norm;
 }
@@ -459,9 +491,12 @@ static ins_gps15_twin_scalar balanced_norm(const ins_gps15_twin_matrices *restri
            balancing
    in powers of two, starting from the fixed D (at the check operating point one sweep finds it a
            fixed
-   point) and stopped at a fixed point; the sums in the reference's order (row by row). */
-static ins_gps15_twin_scalar rebalanced_norm(const ins_gps15_twin_matrices *restrict m,
-        ins_gps15_twin_discretize_scratch *restrict w)
+   point) and stopped at a fixed point; the sums in the reference's order (row by row).
+   Not inlined: it runs only when a doubling is at stake, and inlined, gcc -O2 would keep
+   balanced_norm's |F_ij| on the stack for it on every call (bench/bench_cycle.py: 130
+   instructions at 18 states). */
+INS_GPS15_TWIN_BLOCK ins_gps15_twin_scalar rebalanced_norm(const ins_gps15_twin_matrices *restrict
+        m, ins_gps15_twin_discretize_scratch *restrict w)
 {
     ins_gps15_twin_scalar v, norm = 0.0;
     signed char exponent[INS_GPS15_TWIN_N_STATES]; /* within [-40, 40] */
@@ -819,353 +854,492 @@ static int taylor_plan(const ins_gps15_twin_scalar norm, const ins_gps15_twin_sc
 INS_GPS15_TWIN_BLOCK void horner_input(const ins_gps15_twin_matrices *restrict m,
         ins_gps15_twin_discretize_scratch *restrict w, const ins_gps15_twin_scalar h)
 {
-    w->fh[0] = m->F[0]*h;
-    w->fh[1] = m->F[1]*h;
-    w->fh[2] = m->F[2]*h;
-    w->fh[3] = m->F[3]*h;
-    w->fh[4] = m->F[4]*h;
-    w->fh[5] = m->F[5]*h;
-    w->fh[6] = m->F[6]*h;
-    w->fh[7] = m->F[7]*h;
-    w->fh[8] = m->F[8]*h;
-    w->fh[9] = m->F[9]*h;
-    w->fh[10] = m->F[10]*h;
-    w->fh[11] = m->F[11]*h;
-    w->fh[12] = m->F[12]*h;
-    w->fh[13] = m->F[13]*h;
-    w->fh[14] = m->F[14]*h;
-    w->fh[15] = m->F[15]*h;
-    w->fh[16] = m->F[16]*h;
-    w->fh[17] = m->F[17]*h;
-    w->fh[18] = m->F[18]*h;
-    w->fh[19] = m->F[19]*h;
-    w->fh[20] = m->F[20]*h;
-    w->fh[21] = m->F[21]*h;
-    w->fh[22] = m->F[22]*h;
-    w->fh[23] = m->F[23]*h;
-    w->fh[24] = m->F[24]*h;
-    w->fh[25] = m->F[25]*h;
-    w->fh[26] = m->F[26]*h;
-    w->fh[27] = m->F[27]*h;
-    w->fh[28] = m->F[28]*h;
-    w->fh[29] = m->F[29]*h;
-    w->fh[30] = m->F[30]*h;
-    w->fh[31] = m->F[31]*h;
-    w->fh[32] = m->F[32]*h;
-    w->fh[33] = m->F[33]*h;
-    w->fh[34] = m->F[34]*h;
-    w->fh[35] = m->F[35]*h;
-    w->fh[36] = m->F[36]*h;
-    w->fh[37] = m->F[37]*h;
-    w->fh[38] = m->F[38]*h;
-    w->fh[39] = m->F[39]*h;
-    w->fh[40] = m->F[40]*h;
-    w->fh[41] = m->F[41]*h;
-    w->fh[42] = m->F[42]*h;
-    w->fh[43] = m->F[43]*h;
-    w->fh[44] = m->F[44]*h;
-    w->fh[45] = m->F[45]*h;
-    w->fh[46] = m->F[46]*h;
-    w->fh[47] = m->F[47]*h;
-    w->fh[48] = m->F[48]*h;
-    w->fh[49] = m->F[49]*h;
-    w->fh[50] = m->F[50]*h;
-    w->fh[51] = m->F[51]*h;
-    w->fh[52] = m->F[52]*h;
-    w->fh[53] = m->F[53]*h;
-    w->fh[54] = m->F[54]*h;
-    w->fh[55] = m->F[55]*h;
-    w->fh[56] = m->F[56]*h;
-    w->fh[57] = m->F[57]*h;
+    ins_gps15_twin_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
+    lane_pair_store(&fh_pairs[0], lane_pair_of(m->F[0]*h, m->F[0]*h));
+    lane_pair_store(&fh_pairs[2], lane_pair_of(m->F[1]*h, m->F[1]*h));
+    lane_pair_store(&fh_pairs[4], lane_pair_of(m->F[2]*h, m->F[2]*h));
+    lane_pair_store(&fh_pairs[6], lane_pair_of(m->F[3]*h, m->F[3]*h));
+    lane_pair_store(&fh_pairs[8], lane_pair_of(m->F[4]*h, m->F[4]*h));
+    lane_pair_store(&fh_pairs[10], lane_pair_of(m->F[5]*h, m->F[5]*h));
+    lane_pair_store(&fh_pairs[12], lane_pair_of(m->F[6]*h, m->F[6]*h));
+    lane_pair_store(&fh_pairs[14], lane_pair_of(m->F[7]*h, m->F[7]*h));
+    lane_pair_store(&fh_pairs[16], lane_pair_of(m->F[8]*h, m->F[8]*h));
+    lane_pair_store(&fh_pairs[18], lane_pair_of(m->F[9]*h, m->F[9]*h));
+    lane_pair_store(&fh_pairs[20], lane_pair_of(m->F[10]*h, m->F[10]*h));
+    lane_pair_store(&fh_pairs[22], lane_pair_of(m->F[11]*h, m->F[11]*h));
+    lane_pair_store(&fh_pairs[24], lane_pair_of(m->F[12]*h, m->F[12]*h));
+    lane_pair_store(&fh_pairs[26], lane_pair_of(m->F[13]*h, m->F[13]*h));
+    lane_pair_store(&fh_pairs[28], lane_pair_of(m->F[14]*h, m->F[14]*h));
+    lane_pair_store(&fh_pairs[30], lane_pair_of(m->F[15]*h, m->F[15]*h));
+    lane_pair_store(&fh_pairs[32], lane_pair_of(m->F[16]*h, m->F[16]*h));
+    lane_pair_store(&fh_pairs[34], lane_pair_of(m->F[17]*h, m->F[17]*h));
+    lane_pair_store(&fh_pairs[36], lane_pair_of(m->F[18]*h, m->F[18]*h));
+    lane_pair_store(&fh_pairs[38], lane_pair_of(m->F[19]*h, m->F[19]*h));
+    lane_pair_store(&fh_pairs[40], lane_pair_of(m->F[20]*h, m->F[20]*h));
+    lane_pair_store(&fh_pairs[42], lane_pair_of(m->F[21]*h, m->F[21]*h));
+    lane_pair_store(&fh_pairs[44], lane_pair_of(m->F[22]*h, m->F[22]*h));
+    lane_pair_store(&fh_pairs[46], lane_pair_of(m->F[23]*h, m->F[23]*h));
+    lane_pair_store(&fh_pairs[48], lane_pair_of(m->F[24]*h, m->F[24]*h));
+    lane_pair_store(&fh_pairs[50], lane_pair_of(m->F[25]*h, m->F[25]*h));
+    lane_pair_store(&fh_pairs[52], lane_pair_of(m->F[26]*h, m->F[26]*h));
+    lane_pair_store(&fh_pairs[54], lane_pair_of(m->F[27]*h, m->F[27]*h));
+    lane_pair_store(&fh_pairs[56], lane_pair_of(m->F[28]*h, m->F[28]*h));
+    lane_pair_store(&fh_pairs[58], lane_pair_of(m->F[29]*h, m->F[29]*h));
+    lane_pair_store(&fh_pairs[60], lane_pair_of(m->F[30]*h, m->F[30]*h));
+    lane_pair_store(&fh_pairs[62], lane_pair_of(m->F[31]*h, m->F[31]*h));
+    lane_pair_store(&fh_pairs[64], lane_pair_of(m->F[32]*h, m->F[32]*h));
+    lane_pair_store(&fh_pairs[66], lane_pair_of(m->F[33]*h, m->F[33]*h));
+    lane_pair_store(&fh_pairs[68], lane_pair_of(m->F[34]*h, m->F[34]*h));
+    lane_pair_store(&fh_pairs[70], lane_pair_of(m->F[35]*h, m->F[35]*h));
+    lane_pair_store(&fh_pairs[72], lane_pair_of(m->F[36]*h, m->F[36]*h));
+    lane_pair_store(&fh_pairs[74], lane_pair_of(m->F[37]*h, m->F[37]*h));
+    lane_pair_store(&fh_pairs[76], lane_pair_of(m->F[38]*h, m->F[38]*h));
+    lane_pair_store(&fh_pairs[78], lane_pair_of(m->F[39]*h, m->F[39]*h));
+    lane_pair_store(&fh_pairs[80], lane_pair_of(m->F[40]*h, m->F[40]*h));
+    lane_pair_store(&fh_pairs[82], lane_pair_of(m->F[41]*h, m->F[41]*h));
+    lane_pair_store(&fh_pairs[84], lane_pair_of(m->F[42]*h, m->F[42]*h));
+    lane_pair_store(&fh_pairs[86], lane_pair_of(m->F[43]*h, m->F[43]*h));
+    lane_pair_store(&fh_pairs[88], lane_pair_of(m->F[44]*h, m->F[44]*h));
+    lane_pair_store(&fh_pairs[90], lane_pair_of(m->F[45]*h, m->F[45]*h));
+    lane_pair_store(&fh_pairs[92], lane_pair_of(m->F[46]*h, m->F[46]*h));
+    lane_pair_store(&fh_pairs[94], lane_pair_of(m->F[47]*h, m->F[47]*h));
+    lane_pair_store(&fh_pairs[96], lane_pair_of(m->F[48]*h, m->F[48]*h));
+    lane_pair_store(&fh_pairs[98], lane_pair_of(m->F[49]*h, m->F[49]*h));
+    lane_pair_store(&fh_pairs[100], lane_pair_of(m->F[50]*h, m->F[50]*h));
+    lane_pair_store(&fh_pairs[102], lane_pair_of(m->F[51]*h, m->F[51]*h));
+    lane_pair_store(&fh_pairs[104], lane_pair_of(m->F[52]*h, m->F[52]*h));
+    lane_pair_store(&fh_pairs[106], lane_pair_of(m->F[53]*h, m->F[53]*h));
+    lane_pair_store(&fh_pairs[108], lane_pair_of(m->F[54]*h, m->F[54]*h));
+    lane_pair_store(&fh_pairs[110], lane_pair_of(m->F[55]*h, m->F[55]*h));
+    lane_pair_store(&fh_pairs[112], lane_pair_of(m->F[56]*h, m->F[56]*h));
+    lane_pair_store(&fh_pairs[114], lane_pair_of(m->F[57]*h, m->F[57]*h));
 }
 
 INS_GPS15_TWIN_BLOCK void horner_level_1_into_S(ins_gps15_twin_discretize_scratch *restrict w, const
         ins_gps15_twin_scalar c_out, const ins_gps15_twin_scalar c_in)
 {
+    const ins_gps15_twin_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     w->S[0] = c_out;
-    w->S[1] = w->fh[0]*c_in;
-    w->S[2] = w->fh[1]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[0], fh_pairs[2]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[1], pair);
+    }
     w->S[3] = 0;
-    w->S[4] = w->fh[2]*c_in;
-    w->S[5] = 0;
-    w->S[6] = 0;
-    w->S[7] = w->fh[3]*c_in;
-    w->S[8] = w->fh[7]*c_in;
+    w->S[4] = fh_pairs[4]*c_in;
+    lane_pair_store(&w->S[5], lane_pair_of(0, 0));
+    w->S[7] = fh_pairs[6]*c_in;
+    w->S[8] = fh_pairs[14]*c_in;
     w->S[9] = c_out;
-    w->S[10] = w->fh[8]*c_in;
-    w->S[11] = w->fh[9]*c_in;
-    w->S[12] = 0;
-    w->S[13] = 0;
-    w->S[14] = w->fh[10]*c_in;
-    w->S[15] = w->fh[11]*c_in;
-    w->S[16] = w->fh[15]*c_in;
-    w->S[17] = w->fh[16]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[16], fh_pairs[18]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[10], pair);
+    }
+    lane_pair_store(&w->S[12], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[20], fh_pairs[22]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[30], fh_pairs[32]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[16], pair);
+    }
     w->S[18] = c_out;
-    w->S[19] = w->fh[17]*c_in;
-    w->S[20] = 0;
-    w->S[21] = 0;
-    w->S[22] = w->fh[18]*c_in;
-    w->S[23] = w->fh[19]*c_in;
+    w->S[19] = fh_pairs[34]*c_in;
+    lane_pair_store(&w->S[20], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[36], fh_pairs[38]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[22], pair);
+    }
     w->S[24] = 0;
-    w->S[25] = w->fh[23]*c_in;
-    w->S[26] = w->fh[24]*c_in;
-    w->S[27] = c_out + w->fh[25]*c_in;
-    w->S[28] = w->fh[26]*c_in;
-    w->S[29] = w->fh[27]*c_in;
-    w->S[30] = w->fh[28]*c_in;
-    w->S[31] = w->fh[29]*c_in;
-    w->S[32] = w->fh[33]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[46], fh_pairs[48]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[25], pair);
+    }
+    w->S[27] = c_out + fh_pairs[50]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[52], fh_pairs[54]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[56], fh_pairs[58]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[30], pair);
+    }
+    w->S[32] = fh_pairs[66]*c_in;
     w->S[33] = 0;
-    w->S[34] = w->fh[34]*c_in;
-    w->S[35] = w->fh[35]*c_in;
-    w->S[36] = c_out + w->fh[36]*c_in;
-    w->S[37] = w->fh[37]*c_in;
-    w->S[38] = w->fh[38]*c_in;
-    w->S[39] = w->fh[39]*c_in;
-    w->S[40] = w->fh[43]*c_in;
-    w->S[41] = w->fh[44]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[68], fh_pairs[70]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[34], pair);
+    }
+    w->S[36] = c_out + fh_pairs[72]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[74], fh_pairs[76]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[37], pair);
+    }
+    w->S[39] = fh_pairs[78]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[86], fh_pairs[88]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[40], pair);
+    }
     w->S[42] = 0;
-    w->S[43] = w->fh[45]*c_in;
-    w->S[44] = w->fh[46]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[90], fh_pairs[92]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[43], pair);
+    }
     w->S[45] = c_out;
-    w->S[46] = w->fh[47]*c_in;
-    w->S[47] = w->fh[48]*c_in;
-    w->S[48] = 0;
-    w->S[49] = 0;
-    w->S[50] = 0;
-    w->S[51] = 0;
-    w->S[52] = w->fh[52]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[94], fh_pairs[96]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[46], pair);
+    }
+    lane_pair_store(&w->S[48], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[50], lane_pair_of(0, 0));
+    w->S[52] = fh_pairs[104]*c_in;
     w->S[53] = 0;
     w->S[54] = c_out;
-    w->S[55] = w->fh[53]*c_in;
-    w->S[56] = 0;
-    w->S[57] = 0;
+    w->S[55] = fh_pairs[106]*c_in;
+    lane_pair_store(&w->S[56], lane_pair_of(0, 0));
     w->S[58] = 0;
-    w->S[59] = w->fh[54]*c_in;
-    w->S[60] = 0;
-    w->S[61] = 0;
-    w->S[62] = w->fh[55]*c_in;
-    w->S[63] = w->fh[56]*c_in;
-    w->S[64] = 0;
-    w->S[65] = 0;
-    w->S[66] = 0;
-    w->S[67] = 0;
+    w->S[59] = fh_pairs[108]*c_in;
+    lane_pair_store(&w->S[60], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[110], fh_pairs[112]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[62], pair);
+    }
+    lane_pair_store(&w->S[64], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[66], lane_pair_of(0, 0));
     w->S[68] = 0;
-    w->S[69] = w->fh[57]*c_in;
+    w->S[69] = fh_pairs[114]*c_in;
     w->S[70] = 0;
     w->S[71] = c_out;
-    w->S[72] = w->fh[4]*c_in;
-    w->S[73] = w->fh[5]*c_in;
-    w->S[74] = w->fh[6]*c_in;
-    w->S[75] = 0;
-    w->S[76] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[8], fh_pairs[10]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[72], pair);
+    }
+    w->S[74] = fh_pairs[12]*c_in;
+    lane_pair_store(&w->S[75], lane_pair_of(0, 0));
     w->S[77] = 0;
-    w->S[78] = w->fh[12]*c_in;
-    w->S[79] = w->fh[13]*c_in;
-    w->S[80] = w->fh[14]*c_in;
-    w->S[81] = 0;
-    w->S[82] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[24], fh_pairs[26]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[78], pair);
+    }
+    w->S[80] = fh_pairs[28]*c_in;
+    lane_pair_store(&w->S[81], lane_pair_of(0, 0));
     w->S[83] = 0;
-    w->S[84] = w->fh[20]*c_in;
-    w->S[85] = w->fh[21]*c_in;
-    w->S[86] = w->fh[22]*c_in;
-    w->S[87] = 0;
-    w->S[88] = 0;
-    w->S[89] = 0;
-    w->S[90] = 0;
-    w->S[91] = 0;
-    w->S[92] = 0;
-    w->S[93] = w->fh[30]*c_in;
-    w->S[94] = w->fh[31]*c_in;
-    w->S[95] = w->fh[32]*c_in;
-    w->S[96] = 0;
-    w->S[97] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[40], fh_pairs[42]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[84], pair);
+    }
+    w->S[86] = fh_pairs[44]*c_in;
+    lane_pair_store(&w->S[87], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[89], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[91], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[60], fh_pairs[62]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[93], pair);
+    }
+    w->S[95] = fh_pairs[64]*c_in;
+    lane_pair_store(&w->S[96], lane_pair_of(0, 0));
     w->S[98] = 0;
-    w->S[99] = w->fh[40]*c_in;
-    w->S[100] = w->fh[41]*c_in;
-    w->S[101] = w->fh[42]*c_in;
-    w->S[102] = 0;
-    w->S[103] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[80], fh_pairs[82]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[99], pair);
+    }
+    w->S[101] = fh_pairs[84]*c_in;
+    lane_pair_store(&w->S[102], lane_pair_of(0, 0));
     w->S[104] = 0;
-    w->S[105] = w->fh[49]*c_in;
-    w->S[106] = w->fh[50]*c_in;
-    w->S[107] = w->fh[51]*c_in;
-    w->S[108] = 0;
-    w->S[109] = 0;
-    w->S[110] = 0;
-    w->S[111] = 0;
-    w->S[112] = 0;
-    w->S[113] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[98], fh_pairs[100]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[105], pair);
+    }
+    w->S[107] = fh_pairs[102]*c_in;
+    lane_pair_store(&w->S[108], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[110], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[112], lane_pair_of(0, 0));
     w->S[114] = c_out;
-    w->S[115] = 0;
-    w->S[116] = 0;
-    w->S[117] = 0;
-    w->S[118] = 0;
-    w->S[119] = 0;
-    w->S[120] = 0;
-    w->S[121] = 0;
-    w->S[122] = 0;
-    w->S[123] = 0;
-    w->S[124] = 0;
-    w->S[125] = 0;
-    w->S[126] = 0;
+    lane_pair_store(&w->S[115], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[117], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[119], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[121], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[123], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[125], lane_pair_of(0, 0));
 }
 
 INS_GPS15_TWIN_BLOCK void horner_level_1_into_term(ins_gps15_twin_discretize_scratch *restrict w,
         const ins_gps15_twin_scalar c_out, const ins_gps15_twin_scalar c_in)
 {
+    const ins_gps15_twin_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     w->term[1][0] = c_out;
-    w->term[1][1] = w->fh[0]*c_in;
-    w->term[1][2] = w->fh[1]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[0], fh_pairs[2]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][1], pair);
+    }
     w->term[1][3] = 0;
-    w->term[1][4] = w->fh[2]*c_in;
-    w->term[1][5] = 0;
-    w->term[1][6] = 0;
-    w->term[1][7] = w->fh[3]*c_in;
-    w->term[1][8] = w->fh[7]*c_in;
+    w->term[1][4] = fh_pairs[4]*c_in;
+    lane_pair_store(&w->term[1][5], lane_pair_of(0, 0));
+    w->term[1][7] = fh_pairs[6]*c_in;
+    w->term[1][8] = fh_pairs[14]*c_in;
     w->term[1][9] = c_out;
-    w->term[1][10] = w->fh[8]*c_in;
-    w->term[1][11] = w->fh[9]*c_in;
-    w->term[1][12] = 0;
-    w->term[1][13] = 0;
-    w->term[1][14] = w->fh[10]*c_in;
-    w->term[1][15] = w->fh[11]*c_in;
-    w->term[1][16] = w->fh[15]*c_in;
-    w->term[1][17] = w->fh[16]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[16], fh_pairs[18]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][10], pair);
+    }
+    lane_pair_store(&w->term[1][12], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[20], fh_pairs[22]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[30], fh_pairs[32]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][16], pair);
+    }
     w->term[1][18] = c_out;
-    w->term[1][19] = w->fh[17]*c_in;
-    w->term[1][20] = 0;
-    w->term[1][21] = 0;
-    w->term[1][22] = w->fh[18]*c_in;
-    w->term[1][23] = w->fh[19]*c_in;
+    w->term[1][19] = fh_pairs[34]*c_in;
+    lane_pair_store(&w->term[1][20], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[36], fh_pairs[38]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][22], pair);
+    }
     w->term[1][24] = 0;
-    w->term[1][25] = w->fh[23]*c_in;
-    w->term[1][26] = w->fh[24]*c_in;
-    w->term[1][27] = c_out + w->fh[25]*c_in;
-    w->term[1][28] = w->fh[26]*c_in;
-    w->term[1][29] = w->fh[27]*c_in;
-    w->term[1][30] = w->fh[28]*c_in;
-    w->term[1][31] = w->fh[29]*c_in;
-    w->term[1][32] = w->fh[33]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[46], fh_pairs[48]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][25], pair);
+    }
+    w->term[1][27] = c_out + fh_pairs[50]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[52], fh_pairs[54]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[56], fh_pairs[58]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][30], pair);
+    }
+    w->term[1][32] = fh_pairs[66]*c_in;
     w->term[1][33] = 0;
-    w->term[1][34] = w->fh[34]*c_in;
-    w->term[1][35] = w->fh[35]*c_in;
-    w->term[1][36] = c_out + w->fh[36]*c_in;
-    w->term[1][37] = w->fh[37]*c_in;
-    w->term[1][38] = w->fh[38]*c_in;
-    w->term[1][39] = w->fh[39]*c_in;
-    w->term[1][40] = w->fh[43]*c_in;
-    w->term[1][41] = w->fh[44]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[68], fh_pairs[70]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][34], pair);
+    }
+    w->term[1][36] = c_out + fh_pairs[72]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[74], fh_pairs[76]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][37], pair);
+    }
+    w->term[1][39] = fh_pairs[78]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[86], fh_pairs[88]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][40], pair);
+    }
     w->term[1][42] = 0;
-    w->term[1][43] = w->fh[45]*c_in;
-    w->term[1][44] = w->fh[46]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[90], fh_pairs[92]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][43], pair);
+    }
     w->term[1][45] = c_out;
-    w->term[1][46] = w->fh[47]*c_in;
-    w->term[1][47] = w->fh[48]*c_in;
-    w->term[1][48] = 0;
-    w->term[1][49] = 0;
-    w->term[1][50] = 0;
-    w->term[1][51] = 0;
-    w->term[1][52] = w->fh[52]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[94], fh_pairs[96]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][46], pair);
+    }
+    lane_pair_store(&w->term[1][48], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][50], lane_pair_of(0, 0));
+    w->term[1][52] = fh_pairs[104]*c_in;
     w->term[1][53] = 0;
     w->term[1][54] = c_out;
-    w->term[1][55] = w->fh[53]*c_in;
-    w->term[1][56] = 0;
-    w->term[1][57] = 0;
+    w->term[1][55] = fh_pairs[106]*c_in;
+    lane_pair_store(&w->term[1][56], lane_pair_of(0, 0));
     w->term[1][58] = 0;
-    w->term[1][59] = w->fh[54]*c_in;
-    w->term[1][60] = 0;
-    w->term[1][61] = 0;
-    w->term[1][62] = w->fh[55]*c_in;
-    w->term[1][63] = w->fh[56]*c_in;
-    w->term[1][64] = 0;
-    w->term[1][65] = 0;
-    w->term[1][66] = 0;
-    w->term[1][67] = 0;
+    w->term[1][59] = fh_pairs[108]*c_in;
+    lane_pair_store(&w->term[1][60], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[110], fh_pairs[112]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][62], pair);
+    }
+    lane_pair_store(&w->term[1][64], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][66], lane_pair_of(0, 0));
     w->term[1][68] = 0;
-    w->term[1][69] = w->fh[57]*c_in;
+    w->term[1][69] = fh_pairs[114]*c_in;
     w->term[1][70] = 0;
     w->term[1][71] = c_out;
-    w->term[1][72] = w->fh[4]*c_in;
-    w->term[1][73] = w->fh[5]*c_in;
-    w->term[1][74] = w->fh[6]*c_in;
-    w->term[1][75] = 0;
-    w->term[1][76] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[8], fh_pairs[10]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][72], pair);
+    }
+    w->term[1][74] = fh_pairs[12]*c_in;
+    lane_pair_store(&w->term[1][75], lane_pair_of(0, 0));
     w->term[1][77] = 0;
-    w->term[1][78] = w->fh[12]*c_in;
-    w->term[1][79] = w->fh[13]*c_in;
-    w->term[1][80] = w->fh[14]*c_in;
-    w->term[1][81] = 0;
-    w->term[1][82] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[24], fh_pairs[26]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][78], pair);
+    }
+    w->term[1][80] = fh_pairs[28]*c_in;
+    lane_pair_store(&w->term[1][81], lane_pair_of(0, 0));
     w->term[1][83] = 0;
-    w->term[1][84] = w->fh[20]*c_in;
-    w->term[1][85] = w->fh[21]*c_in;
-    w->term[1][86] = w->fh[22]*c_in;
-    w->term[1][87] = 0;
-    w->term[1][88] = 0;
-    w->term[1][89] = 0;
-    w->term[1][90] = 0;
-    w->term[1][91] = 0;
-    w->term[1][92] = 0;
-    w->term[1][93] = w->fh[30]*c_in;
-    w->term[1][94] = w->fh[31]*c_in;
-    w->term[1][95] = w->fh[32]*c_in;
-    w->term[1][96] = 0;
-    w->term[1][97] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[40], fh_pairs[42]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][84], pair);
+    }
+    w->term[1][86] = fh_pairs[44]*c_in;
+    lane_pair_store(&w->term[1][87], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][89], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][91], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[60], fh_pairs[62]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][93], pair);
+    }
+    w->term[1][95] = fh_pairs[64]*c_in;
+    lane_pair_store(&w->term[1][96], lane_pair_of(0, 0));
     w->term[1][98] = 0;
-    w->term[1][99] = w->fh[40]*c_in;
-    w->term[1][100] = w->fh[41]*c_in;
-    w->term[1][101] = w->fh[42]*c_in;
-    w->term[1][102] = 0;
-    w->term[1][103] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[80], fh_pairs[82]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][99], pair);
+    }
+    w->term[1][101] = fh_pairs[84]*c_in;
+    lane_pair_store(&w->term[1][102], lane_pair_of(0, 0));
     w->term[1][104] = 0;
-    w->term[1][105] = w->fh[49]*c_in;
-    w->term[1][106] = w->fh[50]*c_in;
-    w->term[1][107] = w->fh[51]*c_in;
-    w->term[1][108] = 0;
-    w->term[1][109] = 0;
-    w->term[1][110] = 0;
-    w->term[1][111] = 0;
-    w->term[1][112] = 0;
-    w->term[1][113] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[98], fh_pairs[100]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][105], pair);
+    }
+    w->term[1][107] = fh_pairs[102]*c_in;
+    lane_pair_store(&w->term[1][108], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][110], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][112], lane_pair_of(0, 0));
     w->term[1][114] = c_out;
-    w->term[1][115] = 0;
-    w->term[1][116] = 0;
-    w->term[1][117] = 0;
-    w->term[1][118] = 0;
-    w->term[1][119] = 0;
-    w->term[1][120] = 0;
-    w->term[1][121] = 0;
-    w->term[1][122] = 0;
-    w->term[1][123] = 0;
-    w->term[1][124] = 0;
-    w->term[1][125] = 0;
-    w->term[1][126] = 0;
+    lane_pair_store(&w->term[1][115], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][117], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][119], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][121], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][123], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][125], lane_pair_of(0, 0));
 }
 
 INS_GPS15_TWIN_BLOCK void horner_saturated_into_S(ins_gps15_twin_discretize_scratch *restrict w,
         const ins_gps15_twin_scalar c_out)
 {
+    const ins_gps15_twin_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 8; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][8+k] + w->fh[1]*w->term[1][16+k] + w->fh[2]*w->term[1][32+k] +
-                w->fh[3]*w->term[1][64+k];
-        w->S[8+k] = w->fh[7]*w->term[1][k] + w->fh[8]*w->term[1][16+k] + w->fh[9]*w->term[1][24+k] +
-                w->fh[10]*w->term[1][48+k] + w->fh[11]*w->term[1][64+k];
-        w->S[16+k] = w->fh[15]*w->term[1][k] + w->fh[16]*w->term[1][8+k] +
-                w->fh[17]*w->term[1][24+k] + w->fh[18]*w->term[1][48+k] +
-                w->fh[19]*w->term[1][64+k];
-        w->S[24+k] = w->fh[23]*w->term[1][8+k] + w->fh[24]*w->term[1][16+k] +
-                w->fh[25]*w->term[1][24+k] + w->fh[26]*w->term[1][32+k] + w->fh[27]*w->term[1][40+k]
-                + w->fh[28]*w->term[1][48+k] + w->fh[29]*w->term[1][64+k];
-        w->S[32+k] = w->fh[33]*w->term[1][k] + w->fh[34]*w->term[1][16+k] +
-                w->fh[35]*w->term[1][24+k] + w->fh[36]*w->term[1][32+k] + w->fh[37]*w->term[1][40+k]
-                + w->fh[38]*w->term[1][48+k] + w->fh[39]*w->term[1][64+k];
-        w->S[40+k] = w->fh[43]*w->term[1][k] + w->fh[44]*w->term[1][8+k] +
-                w->fh[45]*w->term[1][24+k] + w->fh[46]*w->term[1][32+k] + w->fh[47]*w->term[1][48+k]
-                + w->fh[48]*w->term[1][64+k];
-        w->S[48+k] = w->fh[52]*w->term[1][32+k] + w->fh[53]*w->term[1][64+k];
-        w->S[64+k] = w->fh[57]*w->term[1][40+k];
+    for (k = 0; k < 8; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->term[1][8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->term[1][16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->term[1][32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->term[1][64+k]));
+        lane_pair_store(&w->S[k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[14]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[16]),
+                lane_pair_load(&w->term[1][16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[18]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->term[1][64+k]));
+        lane_pair_store(&w->S[8+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[30]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[32]),
+                lane_pair_load(&w->term[1][8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[38]),
+                lane_pair_load(&w->term[1][64+k]));
+        lane_pair_store(&w->S[16+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->term[1][8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->term[1][16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[52]),
+                lane_pair_load(&w->term[1][32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->term[1][40+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[56]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->term[1][64+k]));
+        lane_pair_store(&w->S[24+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[68]),
+                lane_pair_load(&w->term[1][16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[72]),
+                lane_pair_load(&w->term[1][32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[74]),
+                lane_pair_load(&w->term[1][40+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->term[1][64+k]));
+        lane_pair_store(&w->S[32+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[86]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[88]),
+                lane_pair_load(&w->term[1][8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[90]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[92]),
+                lane_pair_load(&w->term[1][32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[96]),
+                lane_pair_load(&w->term[1][64+k]));
+        lane_pair_store(&w->S[40+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[104]),
+                lane_pair_load(&w->term[1][32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[106]),
+                lane_pair_load(&w->term[1][64+k]));
+        lane_pair_store(&w->S[48+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->term[1][40+k]));
+        lane_pair_store(&w->S[64+k], lanes);
     }
     w->S[0] = w->S[0] + c_out;
     w->S[9] = w->S[9] + c_out;
@@ -1180,24 +1354,87 @@ INS_GPS15_TWIN_BLOCK void horner_saturated_into_S(ins_gps15_twin_discretize_scra
 INS_GPS15_TWIN_BLOCK void horner_saturated_into_term(ins_gps15_twin_discretize_scratch *restrict w,
         const ins_gps15_twin_scalar c_out)
 {
+    const ins_gps15_twin_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 8; ++k) {
-        w->term[1][k] = w->fh[0]*w->S[8+k] + w->fh[1]*w->S[16+k] + w->fh[2]*w->S[32+k] +
-                w->fh[3]*w->S[64+k];
-        w->term[1][8+k] = w->fh[7]*w->S[k] + w->fh[8]*w->S[16+k] + w->fh[9]*w->S[24+k] +
-                w->fh[10]*w->S[48+k] + w->fh[11]*w->S[64+k];
-        w->term[1][16+k] = w->fh[15]*w->S[k] + w->fh[16]*w->S[8+k] + w->fh[17]*w->S[24+k] +
-                w->fh[18]*w->S[48+k] + w->fh[19]*w->S[64+k];
-        w->term[1][24+k] = w->fh[23]*w->S[8+k] + w->fh[24]*w->S[16+k] + w->fh[25]*w->S[24+k] +
-                w->fh[26]*w->S[32+k] + w->fh[27]*w->S[40+k] + w->fh[28]*w->S[48+k] +
-                w->fh[29]*w->S[64+k];
-        w->term[1][32+k] = w->fh[33]*w->S[k] + w->fh[34]*w->S[16+k] + w->fh[35]*w->S[24+k] +
-                w->fh[36]*w->S[32+k] + w->fh[37]*w->S[40+k] + w->fh[38]*w->S[48+k] +
-                w->fh[39]*w->S[64+k];
-        w->term[1][40+k] = w->fh[43]*w->S[k] + w->fh[44]*w->S[8+k] + w->fh[45]*w->S[24+k] +
-                w->fh[46]*w->S[32+k] + w->fh[47]*w->S[48+k] + w->fh[48]*w->S[64+k];
-        w->term[1][48+k] = w->fh[52]*w->S[32+k] + w->fh[53]*w->S[64+k];
-        w->term[1][64+k] = w->fh[57]*w->S[40+k];
+    for (k = 0; k < 8; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[64+k]));
+        lane_pair_store(&w->term[1][k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[14]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[16]),
+                lane_pair_load(&w->S[16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[18]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[64+k]));
+        lane_pair_store(&w->term[1][8+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[30]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[32]),
+                lane_pair_load(&w->S[8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[38]),
+                lane_pair_load(&w->S[64+k]));
+        lane_pair_store(&w->term[1][16+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->S[8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->S[16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[52]),
+                lane_pair_load(&w->S[32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->S[40+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[56]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->S[64+k]));
+        lane_pair_store(&w->term[1][24+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[66]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[68]),
+                lane_pair_load(&w->S[16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[72]),
+                lane_pair_load(&w->S[32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[74]),
+                lane_pair_load(&w->S[40+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[64+k]));
+        lane_pair_store(&w->term[1][32+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[86]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[88]),
+                lane_pair_load(&w->S[8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[90]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[92]),
+                lane_pair_load(&w->S[32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[96]),
+                lane_pair_load(&w->S[64+k]));
+        lane_pair_store(&w->term[1][40+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[104]),
+                lane_pair_load(&w->S[32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[106]),
+                lane_pair_load(&w->S[64+k]));
+        lane_pair_store(&w->term[1][48+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[40+k]));
+        lane_pair_store(&w->term[1][64+k], lanes);
     }
     w->term[1][0] = w->term[1][0] + c_out;
     w->term[1][9] = w->term[1][9] + c_out;
@@ -1212,25 +1449,94 @@ INS_GPS15_TWIN_BLOCK void horner_saturated_into_term(ins_gps15_twin_discretize_s
 INS_GPS15_TWIN_BLOCK void horner_first_into_term(ins_gps15_twin_discretize_scratch *restrict w,
         const ins_gps15_twin_scalar c_out)
 {
+    const ins_gps15_twin_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 8; ++k) {
-        w->term[1][k] = w->fh[0]*w->S[8+k] + w->fh[1]*w->S[16+k] + w->fh[2]*w->S[32+k] +
-                w->fh[3]*w->S[64+k];
-        w->term[1][8+k] = w->fh[7]*w->S[k] + w->fh[8]*w->S[16+k] + w->fh[9]*w->S[24+k] +
-                w->fh[10]*w->S[48+k] + w->fh[11]*w->S[64+k];
-        w->term[1][16+k] = w->fh[15]*w->S[k] + w->fh[16]*w->S[8+k] + w->fh[17]*w->S[24+k] +
-                w->fh[18]*w->S[48+k] + w->fh[19]*w->S[64+k];
-        w->term[1][24+k] = w->fh[23]*w->S[8+k] + w->fh[24]*w->S[16+k] + w->fh[25]*w->S[24+k] +
-                w->fh[26]*w->S[32+k] + w->fh[27]*w->S[40+k] + w->fh[28]*w->S[48+k] +
-                w->fh[29]*w->S[64+k];
-        w->term[1][32+k] = w->fh[33]*w->S[k] + w->fh[34]*w->S[16+k] + w->fh[35]*w->S[24+k] +
-                w->fh[36]*w->S[32+k] + w->fh[37]*w->S[40+k] + w->fh[38]*w->S[48+k] +
-                w->fh[39]*w->S[64+k];
-        w->term[1][40+k] = w->fh[43]*w->S[k] + w->fh[44]*w->S[8+k] + w->fh[45]*w->S[24+k] +
-                w->fh[46]*w->S[32+k] + w->fh[47]*w->S[48+k] + w->fh[48]*w->S[64+k];
-        w->term[1][48+k] = w->fh[52]*w->S[32+k] + w->fh[53]*w->S[64+k];
-        w->term[1][56+k] = w->fh[54]*w->S[24+k] + w->fh[55]*w->S[48+k] + w->fh[56]*w->S[64+k];
-        w->term[1][64+k] = w->fh[57]*w->S[40+k];
+    for (k = 0; k < 8; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[64+k]));
+        lane_pair_store(&w->term[1][k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[14]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[16]),
+                lane_pair_load(&w->S[16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[18]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[64+k]));
+        lane_pair_store(&w->term[1][8+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[30]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[32]),
+                lane_pair_load(&w->S[8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[38]),
+                lane_pair_load(&w->S[64+k]));
+        lane_pair_store(&w->term[1][16+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->S[8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->S[16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[52]),
+                lane_pair_load(&w->S[32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->S[40+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[56]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->S[64+k]));
+        lane_pair_store(&w->term[1][24+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[66]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[68]),
+                lane_pair_load(&w->S[16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[72]),
+                lane_pair_load(&w->S[32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[74]),
+                lane_pair_load(&w->S[40+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[64+k]));
+        lane_pair_store(&w->term[1][32+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[86]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[88]),
+                lane_pair_load(&w->S[8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[90]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[92]),
+                lane_pair_load(&w->S[32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[96]),
+                lane_pair_load(&w->S[64+k]));
+        lane_pair_store(&w->term[1][40+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[104]),
+                lane_pair_load(&w->S[32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[106]),
+                lane_pair_load(&w->S[64+k]));
+        lane_pair_store(&w->term[1][48+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[108]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[110]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->S[64+k]));
+        lane_pair_store(&w->term[1][56+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[40+k]));
+        lane_pair_store(&w->term[1][64+k], lanes);
     }
     w->term[1][0] = w->term[1][0] + c_out;
     w->term[1][9] = w->term[1][9] + c_out;
@@ -1246,28 +1552,99 @@ INS_GPS15_TWIN_BLOCK void horner_first_into_term(ins_gps15_twin_discretize_scrat
 INS_GPS15_TWIN_BLOCK void horner_last_into_S(ins_gps15_twin_discretize_scratch *restrict w, const
         ins_gps15_twin_scalar c_out)
 {
+    const ins_gps15_twin_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 8; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][8+k] + w->fh[1]*w->term[1][16+k] + w->fh[2]*w->term[1][32+k] +
-                w->fh[3]*w->term[1][64+k];
-        w->S[8+k] = w->fh[7]*w->term[1][k] + w->fh[8]*w->term[1][16+k] + w->fh[9]*w->term[1][24+k] +
-                w->fh[10]*w->term[1][48+k] + w->fh[11]*w->term[1][64+k];
-        w->S[16+k] = w->fh[15]*w->term[1][k] + w->fh[16]*w->term[1][8+k] +
-                w->fh[17]*w->term[1][24+k] + w->fh[18]*w->term[1][48+k] +
-                w->fh[19]*w->term[1][64+k];
-        w->S[24+k] = w->fh[23]*w->term[1][8+k] + w->fh[24]*w->term[1][16+k] +
-                w->fh[25]*w->term[1][24+k] + w->fh[26]*w->term[1][32+k] + w->fh[27]*w->term[1][40+k]
-                + w->fh[28]*w->term[1][48+k] + w->fh[29]*w->term[1][64+k];
-        w->S[32+k] = w->fh[33]*w->term[1][k] + w->fh[34]*w->term[1][16+k] +
-                w->fh[35]*w->term[1][24+k] + w->fh[36]*w->term[1][32+k] + w->fh[37]*w->term[1][40+k]
-                + w->fh[38]*w->term[1][48+k] + w->fh[39]*w->term[1][64+k];
-        w->S[40+k] = w->fh[43]*w->term[1][k] + w->fh[44]*w->term[1][8+k] +
-                w->fh[45]*w->term[1][24+k] + w->fh[46]*w->term[1][32+k] + w->fh[47]*w->term[1][48+k]
-                + w->fh[48]*w->term[1][64+k];
-        w->S[48+k] = w->fh[52]*w->term[1][32+k] + w->fh[53]*w->term[1][64+k];
-        w->S[56+k] = w->fh[54]*w->term[1][24+k] + w->fh[55]*w->term[1][48+k] +
-                w->fh[56]*w->term[1][64+k];
-        w->S[64+k] = w->fh[57]*w->term[1][40+k];
+    for (k = 0; k < 8; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->term[1][8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->term[1][16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->term[1][32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->term[1][64+k]));
+        lane_pair_store(&w->S[k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[14]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[16]),
+                lane_pair_load(&w->term[1][16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[18]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->term[1][64+k]));
+        lane_pair_store(&w->S[8+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[30]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[32]),
+                lane_pair_load(&w->term[1][8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[38]),
+                lane_pair_load(&w->term[1][64+k]));
+        lane_pair_store(&w->S[16+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->term[1][8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->term[1][16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[52]),
+                lane_pair_load(&w->term[1][32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->term[1][40+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[56]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->term[1][64+k]));
+        lane_pair_store(&w->S[24+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[68]),
+                lane_pair_load(&w->term[1][16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[72]),
+                lane_pair_load(&w->term[1][32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[74]),
+                lane_pair_load(&w->term[1][40+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->term[1][64+k]));
+        lane_pair_store(&w->S[32+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[86]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[88]),
+                lane_pair_load(&w->term[1][8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[90]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[92]),
+                lane_pair_load(&w->term[1][32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[96]),
+                lane_pair_load(&w->term[1][64+k]));
+        lane_pair_store(&w->S[40+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[104]),
+                lane_pair_load(&w->term[1][32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[106]),
+                lane_pair_load(&w->term[1][64+k]));
+        lane_pair_store(&w->S[48+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[108]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[110]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->term[1][64+k]));
+        lane_pair_store(&w->S[56+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->term[1][40+k]));
+        lane_pair_store(&w->S[64+k], lanes);
     }
     w->S[0] = w->S[0] + c_out;
     w->S[9] = w->S[9] + c_out;
@@ -1282,450 +1659,477 @@ INS_GPS15_TWIN_BLOCK void horner_last_into_S(ins_gps15_twin_discretize_scratch *
 
 INS_GPS15_TWIN_BLOCK void horner_unit_columns(ins_gps15_twin_discretize_scratch *restrict w)
 {
+    const ins_gps15_twin_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
-                lane_pair_load(&w->fh[20]));
+                lane_pair_of(fh_pairs[40], fh_pairs[42]));
         lane_pair_store(&w->S[72], pair);
     }
-    w->S[74] = w->term[1][0]*w->fh[6] + w->term[1][1]*w->fh[14] + w->term[1][2]*w->fh[22];
+    w->S[74] = w->term[1][0]*fh_pairs[12] + w->term[1][1]*fh_pairs[28] + w->term[1][2]*fh_pairs[44];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][3], w->term[1][3]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][4], w->term[1][4]),
-                lane_pair_load(&w->fh[40]));
+                lane_pair_of(fh_pairs[80], fh_pairs[82]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][5], w->term[1][5]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&w->S[75], pair);
     }
-    w->S[77] = w->term[1][3]*w->fh[32] + w->term[1][4]*w->fh[42] + w->term[1][5]*w->fh[51];
+    w->S[77] = w->term[1][3]*fh_pairs[64] + w->term[1][4]*fh_pairs[84] +
+            w->term[1][5]*fh_pairs[102];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][8], w->term[1][8]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][9], w->term[1][9]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][10], w->term[1][10]),
-                lane_pair_load(&w->fh[20]));
+                lane_pair_of(fh_pairs[40], fh_pairs[42]));
         lane_pair_store(&w->S[78], pair);
     }
-    w->S[80] = w->term[1][8]*w->fh[6] + w->term[1][9]*w->fh[14] + w->term[1][10]*w->fh[22];
+    w->S[80] = w->term[1][8]*fh_pairs[12] + w->term[1][9]*fh_pairs[28] +
+            w->term[1][10]*fh_pairs[44];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][11], w->term[1][11]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][12], w->term[1][12]),
-                lane_pair_load(&w->fh[40]));
+                lane_pair_of(fh_pairs[80], fh_pairs[82]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&w->S[81], pair);
     }
-    w->S[83] = w->term[1][11]*w->fh[32] + w->term[1][12]*w->fh[42] + w->term[1][13]*w->fh[51];
+    w->S[83] = w->term[1][11]*fh_pairs[64] + w->term[1][12]*fh_pairs[84] +
+            w->term[1][13]*fh_pairs[102];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][16], w->term[1][16]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][17], w->term[1][17]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][18], w->term[1][18]),
-                lane_pair_load(&w->fh[20]));
+                lane_pair_of(fh_pairs[40], fh_pairs[42]));
         lane_pair_store(&w->S[84], pair);
     }
-    w->S[86] = w->term[1][16]*w->fh[6] + w->term[1][17]*w->fh[14] + w->term[1][18]*w->fh[22];
+    w->S[86] = w->term[1][16]*fh_pairs[12] + w->term[1][17]*fh_pairs[28] +
+            w->term[1][18]*fh_pairs[44];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][19], w->term[1][19]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][20], w->term[1][20]),
-                lane_pair_load(&w->fh[40]));
+                lane_pair_of(fh_pairs[80], fh_pairs[82]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][21], w->term[1][21]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&w->S[87], pair);
     }
-    w->S[89] = w->term[1][19]*w->fh[32] + w->term[1][20]*w->fh[42] + w->term[1][21]*w->fh[51];
+    w->S[89] = w->term[1][19]*fh_pairs[64] + w->term[1][20]*fh_pairs[84] +
+            w->term[1][21]*fh_pairs[102];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
-                lane_pair_load(&w->fh[20]));
+                lane_pair_of(fh_pairs[40], fh_pairs[42]));
         lane_pair_store(&w->S[90], pair);
     }
-    w->S[92] = w->term[1][24]*w->fh[6] + w->term[1][25]*w->fh[14] + w->term[1][26]*w->fh[22];
+    w->S[92] = w->term[1][24]*fh_pairs[12] + w->term[1][25]*fh_pairs[28] +
+            w->term[1][26]*fh_pairs[44];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][27], w->term[1][27]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][28], w->term[1][28]),
-                lane_pair_load(&w->fh[40]));
+                lane_pair_of(fh_pairs[80], fh_pairs[82]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][29], w->term[1][29]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&w->S[93], pair);
     }
-    w->S[95] = w->term[1][27]*w->fh[32] + w->term[1][28]*w->fh[42] + w->term[1][29]*w->fh[51];
+    w->S[95] = w->term[1][27]*fh_pairs[64] + w->term[1][28]*fh_pairs[84] +
+            w->term[1][29]*fh_pairs[102];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][32], w->term[1][32]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][33], w->term[1][33]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][34], w->term[1][34]),
-                lane_pair_load(&w->fh[20]));
+                lane_pair_of(fh_pairs[40], fh_pairs[42]));
         lane_pair_store(&w->S[96], pair);
     }
-    w->S[98] = w->term[1][32]*w->fh[6] + w->term[1][33]*w->fh[14] + w->term[1][34]*w->fh[22];
+    w->S[98] = w->term[1][32]*fh_pairs[12] + w->term[1][33]*fh_pairs[28] +
+            w->term[1][34]*fh_pairs[44];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][35], w->term[1][35]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][36], w->term[1][36]),
-                lane_pair_load(&w->fh[40]));
+                lane_pair_of(fh_pairs[80], fh_pairs[82]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&w->S[99], pair);
     }
-    w->S[101] = w->term[1][35]*w->fh[32] + w->term[1][36]*w->fh[42] + w->term[1][37]*w->fh[51];
+    w->S[101] = w->term[1][35]*fh_pairs[64] + w->term[1][36]*fh_pairs[84] +
+            w->term[1][37]*fh_pairs[102];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][40], w->term[1][40]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][41], w->term[1][41]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][42], w->term[1][42]),
-                lane_pair_load(&w->fh[20]));
+                lane_pair_of(fh_pairs[40], fh_pairs[42]));
         lane_pair_store(&w->S[102], pair);
     }
-    w->S[104] = w->term[1][40]*w->fh[6] + w->term[1][41]*w->fh[14] + w->term[1][42]*w->fh[22];
+    w->S[104] = w->term[1][40]*fh_pairs[12] + w->term[1][41]*fh_pairs[28] +
+            w->term[1][42]*fh_pairs[44];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][43], w->term[1][43]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][44], w->term[1][44]),
-                lane_pair_load(&w->fh[40]));
+                lane_pair_of(fh_pairs[80], fh_pairs[82]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][45], w->term[1][45]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&w->S[105], pair);
     }
-    w->S[107] = w->term[1][43]*w->fh[32] + w->term[1][44]*w->fh[42] + w->term[1][45]*w->fh[51];
+    w->S[107] = w->term[1][43]*fh_pairs[64] + w->term[1][44]*fh_pairs[84] +
+            w->term[1][45]*fh_pairs[102];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
-                lane_pair_load(&w->fh[20]));
+                lane_pair_of(fh_pairs[40], fh_pairs[42]));
         lane_pair_store(&w->S[108], pair);
     }
-    w->S[110] = w->term[1][48]*w->fh[6] + w->term[1][49]*w->fh[14] + w->term[1][50]*w->fh[22];
+    w->S[110] = w->term[1][48]*fh_pairs[12] + w->term[1][49]*fh_pairs[28] +
+            w->term[1][50]*fh_pairs[44];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][51], w->term[1][51]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][52], w->term[1][52]),
-                lane_pair_load(&w->fh[40]));
+                lane_pair_of(fh_pairs[80], fh_pairs[82]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][53], w->term[1][53]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&w->S[111], pair);
     }
-    w->S[113] = w->term[1][51]*w->fh[32] + w->term[1][52]*w->fh[42] + w->term[1][53]*w->fh[51];
+    w->S[113] = w->term[1][51]*fh_pairs[64] + w->term[1][52]*fh_pairs[84] +
+            w->term[1][53]*fh_pairs[102];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][56], w->term[1][56]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][57], w->term[1][57]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][58], w->term[1][58]),
-                lane_pair_load(&w->fh[20]));
+                lane_pair_of(fh_pairs[40], fh_pairs[42]));
         lane_pair_store(&w->S[115], pair);
     }
-    w->S[117] = w->term[1][56]*w->fh[6] + w->term[1][57]*w->fh[14] + w->term[1][58]*w->fh[22];
+    w->S[117] = w->term[1][56]*fh_pairs[12] + w->term[1][57]*fh_pairs[28] +
+            w->term[1][58]*fh_pairs[44];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][59], w->term[1][59]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][60], w->term[1][60]),
-                lane_pair_load(&w->fh[40]));
+                lane_pair_of(fh_pairs[80], fh_pairs[82]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&w->S[118], pair);
     }
-    w->S[120] = w->term[1][59]*w->fh[32] + w->term[1][60]*w->fh[42] + w->term[1][61]*w->fh[51];
+    w->S[120] = w->term[1][59]*fh_pairs[64] + w->term[1][60]*fh_pairs[84] +
+            w->term[1][61]*fh_pairs[102];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][64], w->term[1][64]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][65], w->term[1][65]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][66], w->term[1][66]),
-                lane_pair_load(&w->fh[20]));
+                lane_pair_of(fh_pairs[40], fh_pairs[42]));
         lane_pair_store(&w->S[121], pair);
     }
-    w->S[123] = w->term[1][64]*w->fh[6] + w->term[1][65]*w->fh[14] + w->term[1][66]*w->fh[22];
+    w->S[123] = w->term[1][64]*fh_pairs[12] + w->term[1][65]*fh_pairs[28] +
+            w->term[1][66]*fh_pairs[44];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][67], w->term[1][67]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][68], w->term[1][68]),
-                lane_pair_load(&w->fh[40]));
+                lane_pair_of(fh_pairs[80], fh_pairs[82]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][69], w->term[1][69]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&w->S[124], pair);
     }
-    w->S[126] = w->term[1][67]*w->fh[32] + w->term[1][68]*w->fh[42] + w->term[1][69]*w->fh[51];
+    w->S[126] = w->term[1][67]*fh_pairs[64] + w->term[1][68]*fh_pairs[84] +
+            w->term[1][69]*fh_pairs[102];
 }
 
 INS_GPS15_TWIN_BLOCK void horner_transition(ins_gps15_twin_transition *restrict t, const
         ins_gps15_twin_discretize_scratch *restrict w)
 {
     const ins_gps15_twin_scalar one = 1.0;
+    const ins_gps15_twin_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
     for (k = 0; k < 7; ++k) {
-        t->Phi[k] = w->fh[0]*w->S[8+k] + w->fh[1]*w->S[16+k] + w->fh[2]*w->S[32+k] +
-                w->fh[3]*w->S[64+k];
+        t->Phi[k] = fh_pairs[0]*w->S[8+k] + fh_pairs[2]*w->S[16+k] + fh_pairs[4]*w->S[32+k] +
+                fh_pairs[6]*w->S[64+k];
     }
     for (k = 0; k < 1; ++k) {
-        t->Phi[7+k] = w->fh[0]*w->S[15+k] + w->fh[1]*w->S[23+k] + w->fh[2]*w->S[39+k] +
-                w->fh[3]*w->S[71+k];
+        t->Phi[7+k] = fh_pairs[0]*w->S[15+k] + fh_pairs[2]*w->S[23+k] + fh_pairs[4]*w->S[39+k] +
+                fh_pairs[6]*w->S[71+k];
     }
     for (k = 0; k < 7; ++k) {
-        t->Phi[14+k] = w->fh[7]*w->S[k] + w->fh[8]*w->S[16+k] + w->fh[9]*w->S[24+k] +
-                w->fh[10]*w->S[48+k] + w->fh[11]*w->S[64+k];
+        t->Phi[14+k] = fh_pairs[14]*w->S[k] + fh_pairs[16]*w->S[16+k] + fh_pairs[18]*w->S[24+k] +
+                fh_pairs[20]*w->S[48+k] + fh_pairs[22]*w->S[64+k];
     }
     for (k = 0; k < 1; ++k) {
-        t->Phi[21+k] = w->fh[7]*w->S[7+k] + w->fh[8]*w->S[23+k] + w->fh[9]*w->S[31+k] +
-                w->fh[10]*w->S[55+k] + w->fh[11]*w->S[71+k];
+        t->Phi[21+k] = fh_pairs[14]*w->S[7+k] + fh_pairs[16]*w->S[23+k] + fh_pairs[18]*w->S[31+k] +
+                fh_pairs[20]*w->S[55+k] + fh_pairs[22]*w->S[71+k];
     }
     for (k = 0; k < 7; ++k) {
-        t->Phi[28+k] = w->fh[15]*w->S[k] + w->fh[16]*w->S[8+k] + w->fh[17]*w->S[24+k] +
-                w->fh[18]*w->S[48+k] + w->fh[19]*w->S[64+k];
+        t->Phi[28+k] = fh_pairs[30]*w->S[k] + fh_pairs[32]*w->S[8+k] + fh_pairs[34]*w->S[24+k] +
+                fh_pairs[36]*w->S[48+k] + fh_pairs[38]*w->S[64+k];
     }
     for (k = 0; k < 1; ++k) {
-        t->Phi[35+k] = w->fh[15]*w->S[7+k] + w->fh[16]*w->S[15+k] + w->fh[17]*w->S[31+k] +
-                w->fh[18]*w->S[55+k] + w->fh[19]*w->S[71+k];
+        t->Phi[35+k] = fh_pairs[30]*w->S[7+k] + fh_pairs[32]*w->S[15+k] + fh_pairs[34]*w->S[31+k] +
+                fh_pairs[36]*w->S[55+k] + fh_pairs[38]*w->S[71+k];
     }
     for (k = 0; k < 7; ++k) {
-        t->Phi[42+k] = w->fh[23]*w->S[8+k] + w->fh[24]*w->S[16+k] + w->fh[25]*w->S[24+k] +
-                w->fh[26]*w->S[32+k] + w->fh[27]*w->S[40+k] + w->fh[28]*w->S[48+k] +
-                w->fh[29]*w->S[64+k];
+        t->Phi[42+k] = fh_pairs[46]*w->S[8+k] + fh_pairs[48]*w->S[16+k] + fh_pairs[50]*w->S[24+k] +
+                fh_pairs[52]*w->S[32+k] + fh_pairs[54]*w->S[40+k] + fh_pairs[56]*w->S[48+k] +
+                fh_pairs[58]*w->S[64+k];
     }
     for (k = 0; k < 1; ++k) {
-        t->Phi[49+k] = w->fh[23]*w->S[15+k] + w->fh[24]*w->S[23+k] + w->fh[25]*w->S[31+k] +
-                w->fh[26]*w->S[39+k] + w->fh[27]*w->S[47+k] + w->fh[28]*w->S[55+k] +
-                w->fh[29]*w->S[71+k];
+        t->Phi[49+k] = fh_pairs[46]*w->S[15+k] + fh_pairs[48]*w->S[23+k] + fh_pairs[50]*w->S[31+k] +
+                fh_pairs[52]*w->S[39+k] + fh_pairs[54]*w->S[47+k] + fh_pairs[56]*w->S[55+k] +
+                fh_pairs[58]*w->S[71+k];
     }
     for (k = 0; k < 7; ++k) {
-        t->Phi[56+k] = w->fh[33]*w->S[k] + w->fh[34]*w->S[16+k] + w->fh[35]*w->S[24+k] +
-                w->fh[36]*w->S[32+k] + w->fh[37]*w->S[40+k] + w->fh[38]*w->S[48+k] +
-                w->fh[39]*w->S[64+k];
+        t->Phi[56+k] = fh_pairs[66]*w->S[k] + fh_pairs[68]*w->S[16+k] + fh_pairs[70]*w->S[24+k] +
+                fh_pairs[72]*w->S[32+k] + fh_pairs[74]*w->S[40+k] + fh_pairs[76]*w->S[48+k] +
+                fh_pairs[78]*w->S[64+k];
     }
     for (k = 0; k < 1; ++k) {
-        t->Phi[63+k] = w->fh[33]*w->S[7+k] + w->fh[34]*w->S[23+k] + w->fh[35]*w->S[31+k] +
-                w->fh[36]*w->S[39+k] + w->fh[37]*w->S[47+k] + w->fh[38]*w->S[55+k] +
-                w->fh[39]*w->S[71+k];
+        t->Phi[63+k] = fh_pairs[66]*w->S[7+k] + fh_pairs[68]*w->S[23+k] + fh_pairs[70]*w->S[31+k] +
+                fh_pairs[72]*w->S[39+k] + fh_pairs[74]*w->S[47+k] + fh_pairs[76]*w->S[55+k] +
+                fh_pairs[78]*w->S[71+k];
     }
     for (k = 0; k < 7; ++k) {
-        t->Phi[70+k] = w->fh[43]*w->S[k] + w->fh[44]*w->S[8+k] + w->fh[45]*w->S[24+k] +
-                w->fh[46]*w->S[32+k] + w->fh[47]*w->S[48+k] + w->fh[48]*w->S[64+k];
+        t->Phi[70+k] = fh_pairs[86]*w->S[k] + fh_pairs[88]*w->S[8+k] + fh_pairs[90]*w->S[24+k] +
+                fh_pairs[92]*w->S[32+k] + fh_pairs[94]*w->S[48+k] + fh_pairs[96]*w->S[64+k];
     }
     for (k = 0; k < 1; ++k) {
-        t->Phi[77+k] = w->fh[43]*w->S[7+k] + w->fh[44]*w->S[15+k] + w->fh[45]*w->S[31+k] +
-                w->fh[46]*w->S[39+k] + w->fh[47]*w->S[55+k] + w->fh[48]*w->S[71+k];
+        t->Phi[77+k] = fh_pairs[86]*w->S[7+k] + fh_pairs[88]*w->S[15+k] + fh_pairs[90]*w->S[31+k] +
+                fh_pairs[92]*w->S[39+k] + fh_pairs[94]*w->S[55+k] + fh_pairs[96]*w->S[71+k];
     }
     for (k = 0; k < 7; ++k) {
-        t->Phi[84+k] = w->fh[52]*w->S[32+k] + w->fh[53]*w->S[64+k];
+        t->Phi[84+k] = fh_pairs[104]*w->S[32+k] + fh_pairs[106]*w->S[64+k];
     }
     for (k = 0; k < 1; ++k) {
-        t->Phi[91+k] = w->fh[52]*w->S[39+k] + w->fh[53]*w->S[71+k];
+        t->Phi[91+k] = fh_pairs[104]*w->S[39+k] + fh_pairs[106]*w->S[71+k];
     }
     for (k = 0; k < 7; ++k) {
-        t->Phi[98+k] = w->fh[54]*w->S[24+k] + w->fh[55]*w->S[48+k] + w->fh[56]*w->S[64+k];
+        t->Phi[98+k] = fh_pairs[108]*w->S[24+k] + fh_pairs[110]*w->S[48+k] +
+                fh_pairs[112]*w->S[64+k];
     }
     for (k = 0; k < 1; ++k) {
-        t->Phi[106+k] = w->fh[54]*w->S[31+k] + w->fh[55]*w->S[55+k] + w->fh[56]*w->S[71+k];
+        t->Phi[106+k] = fh_pairs[108]*w->S[31+k] + fh_pairs[110]*w->S[55+k] +
+                fh_pairs[112]*w->S[71+k];
     }
     for (k = 0; k < 7; ++k) {
-        t->Phi[113+k] = w->fh[57]*w->S[40+k];
+        t->Phi[113+k] = fh_pairs[114]*w->S[40+k];
     }
     for (k = 0; k < 1; ++k) {
-        t->Phi[120+k] = w->fh[57]*w->S[47+k];
+        t->Phi[120+k] = fh_pairs[114]*w->S[47+k];
     }
     {
-        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
-                lane_pair_load(&w->fh[4]));
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]), lane_pair_of(fh_pairs[8],
+                fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
-                lane_pair_load(&w->fh[20]));
+                lane_pair_of(fh_pairs[40], fh_pairs[42]));
         lane_pair_store(&t->Phi[8], pair);
     }
-    t->Phi[10] = w->S[0]*w->fh[6] + w->S[1]*w->fh[14] + w->S[2]*w->fh[22];
+    t->Phi[10] = w->S[0]*fh_pairs[12] + w->S[1]*fh_pairs[28] + w->S[2]*fh_pairs[44];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[3], w->S[3]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[4], w->S[4]),
-                lane_pair_load(&w->fh[40]));
+                lane_pair_of(fh_pairs[80], fh_pairs[82]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[5], w->S[5]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&t->Phi[11], pair);
     }
-    t->Phi[13] = w->S[3]*w->fh[32] + w->S[4]*w->fh[42] + w->S[5]*w->fh[51];
+    t->Phi[13] = w->S[3]*fh_pairs[64] + w->S[4]*fh_pairs[84] + w->S[5]*fh_pairs[102];
     {
-        lane_pair pair = lane_pair_product(lane_pair_of(w->S[8], w->S[8]),
-                lane_pair_load(&w->fh[4]));
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[8], w->S[8]), lane_pair_of(fh_pairs[8],
+                fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[9], w->S[9]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[10], w->S[10]),
-                lane_pair_load(&w->fh[20]));
+                lane_pair_of(fh_pairs[40], fh_pairs[42]));
         lane_pair_store(&t->Phi[22], pair);
     }
-    t->Phi[24] = w->S[8]*w->fh[6] + w->S[9]*w->fh[14] + w->S[10]*w->fh[22];
+    t->Phi[24] = w->S[8]*fh_pairs[12] + w->S[9]*fh_pairs[28] + w->S[10]*fh_pairs[44];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[11], w->S[11]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[12], w->S[12]),
-                lane_pair_load(&w->fh[40]));
+                lane_pair_of(fh_pairs[80], fh_pairs[82]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&t->Phi[25], pair);
     }
-    t->Phi[27] = w->S[11]*w->fh[32] + w->S[12]*w->fh[42] + w->S[13]*w->fh[51];
+    t->Phi[27] = w->S[11]*fh_pairs[64] + w->S[12]*fh_pairs[84] + w->S[13]*fh_pairs[102];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[16], w->S[16]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[17], w->S[17]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[18], w->S[18]),
-                lane_pair_load(&w->fh[20]));
+                lane_pair_of(fh_pairs[40], fh_pairs[42]));
         lane_pair_store(&t->Phi[36], pair);
     }
-    t->Phi[38] = w->S[16]*w->fh[6] + w->S[17]*w->fh[14] + w->S[18]*w->fh[22];
+    t->Phi[38] = w->S[16]*fh_pairs[12] + w->S[17]*fh_pairs[28] + w->S[18]*fh_pairs[44];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[19], w->S[19]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[20], w->S[20]),
-                lane_pair_load(&w->fh[40]));
+                lane_pair_of(fh_pairs[80], fh_pairs[82]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[21], w->S[21]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&t->Phi[39], pair);
     }
-    t->Phi[41] = w->S[19]*w->fh[32] + w->S[20]*w->fh[42] + w->S[21]*w->fh[51];
+    t->Phi[41] = w->S[19]*fh_pairs[64] + w->S[20]*fh_pairs[84] + w->S[21]*fh_pairs[102];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
-                lane_pair_load(&w->fh[20]));
+                lane_pair_of(fh_pairs[40], fh_pairs[42]));
         lane_pair_store(&t->Phi[50], pair);
     }
-    t->Phi[52] = w->S[24]*w->fh[6] + w->S[25]*w->fh[14] + w->S[26]*w->fh[22];
+    t->Phi[52] = w->S[24]*fh_pairs[12] + w->S[25]*fh_pairs[28] + w->S[26]*fh_pairs[44];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[27], w->S[27]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[28], w->S[28]),
-                lane_pair_load(&w->fh[40]));
+                lane_pair_of(fh_pairs[80], fh_pairs[82]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[29], w->S[29]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&t->Phi[53], pair);
     }
-    t->Phi[55] = w->S[27]*w->fh[32] + w->S[28]*w->fh[42] + w->S[29]*w->fh[51];
+    t->Phi[55] = w->S[27]*fh_pairs[64] + w->S[28]*fh_pairs[84] + w->S[29]*fh_pairs[102];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[32], w->S[32]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[33], w->S[33]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[34], w->S[34]),
-                lane_pair_load(&w->fh[20]));
+                lane_pair_of(fh_pairs[40], fh_pairs[42]));
         lane_pair_store(&t->Phi[64], pair);
     }
-    t->Phi[66] = w->S[32]*w->fh[6] + w->S[33]*w->fh[14] + w->S[34]*w->fh[22];
+    t->Phi[66] = w->S[32]*fh_pairs[12] + w->S[33]*fh_pairs[28] + w->S[34]*fh_pairs[44];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[35], w->S[35]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[36], w->S[36]),
-                lane_pair_load(&w->fh[40]));
+                lane_pair_of(fh_pairs[80], fh_pairs[82]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&t->Phi[67], pair);
     }
-    t->Phi[69] = w->S[35]*w->fh[32] + w->S[36]*w->fh[42] + w->S[37]*w->fh[51];
+    t->Phi[69] = w->S[35]*fh_pairs[64] + w->S[36]*fh_pairs[84] + w->S[37]*fh_pairs[102];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[40], w->S[40]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[41], w->S[41]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[42], w->S[42]),
-                lane_pair_load(&w->fh[20]));
+                lane_pair_of(fh_pairs[40], fh_pairs[42]));
         lane_pair_store(&t->Phi[78], pair);
     }
-    t->Phi[80] = w->S[40]*w->fh[6] + w->S[41]*w->fh[14] + w->S[42]*w->fh[22];
+    t->Phi[80] = w->S[40]*fh_pairs[12] + w->S[41]*fh_pairs[28] + w->S[42]*fh_pairs[44];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[43], w->S[43]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[44], w->S[44]),
-                lane_pair_load(&w->fh[40]));
+                lane_pair_of(fh_pairs[80], fh_pairs[82]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[45], w->S[45]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&t->Phi[81], pair);
     }
-    t->Phi[83] = w->S[43]*w->fh[32] + w->S[44]*w->fh[42] + w->S[45]*w->fh[51];
+    t->Phi[83] = w->S[43]*fh_pairs[64] + w->S[44]*fh_pairs[84] + w->S[45]*fh_pairs[102];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
-                lane_pair_load(&w->fh[20]));
+                lane_pair_of(fh_pairs[40], fh_pairs[42]));
         lane_pair_store(&t->Phi[92], pair);
     }
-    t->Phi[94] = w->S[48]*w->fh[6] + w->S[49]*w->fh[14] + w->S[50]*w->fh[22];
+    t->Phi[94] = w->S[48]*fh_pairs[12] + w->S[49]*fh_pairs[28] + w->S[50]*fh_pairs[44];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[51], w->S[51]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[52], w->S[52]),
-                lane_pair_load(&w->fh[40]));
+                lane_pair_of(fh_pairs[80], fh_pairs[82]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[53], w->S[53]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&t->Phi[95], pair);
     }
-    t->Phi[97] = w->S[51]*w->fh[32] + w->S[52]*w->fh[42] + w->S[53]*w->fh[51];
+    t->Phi[97] = w->S[51]*fh_pairs[64] + w->S[52]*fh_pairs[84] + w->S[53]*fh_pairs[102];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[56], w->S[56]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[57], w->S[57]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[58], w->S[58]),
-                lane_pair_load(&w->fh[20]));
+                lane_pair_of(fh_pairs[40], fh_pairs[42]));
         lane_pair_store(&t->Phi[107], pair);
     }
-    t->Phi[109] = w->S[56]*w->fh[6] + w->S[57]*w->fh[14] + w->S[58]*w->fh[22];
+    t->Phi[109] = w->S[56]*fh_pairs[12] + w->S[57]*fh_pairs[28] + w->S[58]*fh_pairs[44];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[59], w->S[59]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[60], w->S[60]),
-                lane_pair_load(&w->fh[40]));
+                lane_pair_of(fh_pairs[80], fh_pairs[82]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&t->Phi[110], pair);
     }
-    t->Phi[112] = w->S[59]*w->fh[32] + w->S[60]*w->fh[42] + w->S[61]*w->fh[51];
+    t->Phi[112] = w->S[59]*fh_pairs[64] + w->S[60]*fh_pairs[84] + w->S[61]*fh_pairs[102];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[64], w->S[64]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[65], w->S[65]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[66], w->S[66]),
-                lane_pair_load(&w->fh[20]));
+                lane_pair_of(fh_pairs[40], fh_pairs[42]));
         lane_pair_store(&t->Phi[121], pair);
     }
-    t->Phi[123] = w->S[64]*w->fh[6] + w->S[65]*w->fh[14] + w->S[66]*w->fh[22];
+    t->Phi[123] = w->S[64]*fh_pairs[12] + w->S[65]*fh_pairs[28] + w->S[66]*fh_pairs[44];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[67], w->S[67]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[68], w->S[68]),
-                lane_pair_load(&w->fh[40]));
+                lane_pair_of(fh_pairs[80], fh_pairs[82]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[69], w->S[69]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&t->Phi[124], pair);
     }
-    t->Phi[126] = w->S[67]*w->fh[32] + w->S[68]*w->fh[42] + w->S[69]*w->fh[51];
+    t->Phi[126] = w->S[67]*fh_pairs[64] + w->S[68]*fh_pairs[84] + w->S[69]*fh_pairs[102];
     t->Phi[105] = 0;
-    t->Phi[127] = one;
-    t->Phi[128] = one;
-    t->Phi[129] = one;
-    t->Phi[130] = one;
-    t->Phi[131] = one;
-    t->Phi[132] = one;
+    {
+        lane_pair pair = lane_pair_of(one, one);
+        lane_pair_store(&t->Phi[127], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(one, one);
+        lane_pair_store(&t->Phi[129], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(one, one);
+        lane_pair_store(&t->Phi[131], pair);
+    }
 }
 
 INS_GPS15_TWIN_BLOCK void doubling(ins_gps15_twin_transition *restrict t,
@@ -1922,314 +2326,895 @@ INS_GPS15_TWIN_BLOCK void doubling(ins_gps15_twin_transition *restrict t,
                 + t->Phi[116]*w->S[90+k] + t->Phi[117]*w->S[96+k] + t->Phi[118]*w->S[102+k] +
                 t->Phi[119]*w->S[108+k] + t->Phi[120]*w->S[121+k];
     }
-    w->term[1][8] = w->term[1][8] + t->Phi[8];
-    w->term[1][9] = w->term[1][9] + t->Phi[9];
-    w->term[1][10] = w->term[1][10] + t->Phi[10];
-    w->term[1][11] = w->term[1][11] + t->Phi[11];
-    w->term[1][12] = w->term[1][12] + t->Phi[12];
-    w->term[1][13] = w->term[1][13] + t->Phi[13];
-    w->term[1][22] = w->term[1][22] + t->Phi[22];
-    w->term[1][23] = w->term[1][23] + t->Phi[23];
-    w->term[1][24] = w->term[1][24] + t->Phi[24];
-    w->term[1][25] = w->term[1][25] + t->Phi[25];
-    w->term[1][26] = w->term[1][26] + t->Phi[26];
-    w->term[1][27] = w->term[1][27] + t->Phi[27];
-    w->term[1][36] = w->term[1][36] + t->Phi[36];
-    w->term[1][37] = w->term[1][37] + t->Phi[37];
-    w->term[1][38] = w->term[1][38] + t->Phi[38];
-    w->term[1][39] = w->term[1][39] + t->Phi[39];
-    w->term[1][40] = w->term[1][40] + t->Phi[40];
-    w->term[1][41] = w->term[1][41] + t->Phi[41];
-    w->term[1][50] = w->term[1][50] + t->Phi[50];
-    w->term[1][51] = w->term[1][51] + t->Phi[51];
-    w->term[1][52] = w->term[1][52] + t->Phi[52];
-    w->term[1][53] = w->term[1][53] + t->Phi[53];
-    w->term[1][54] = w->term[1][54] + t->Phi[54];
-    w->term[1][55] = w->term[1][55] + t->Phi[55];
-    w->term[1][64] = w->term[1][64] + t->Phi[64];
-    w->term[1][65] = w->term[1][65] + t->Phi[65];
-    w->term[1][66] = w->term[1][66] + t->Phi[66];
-    w->term[1][67] = w->term[1][67] + t->Phi[67];
-    w->term[1][68] = w->term[1][68] + t->Phi[68];
-    w->term[1][69] = w->term[1][69] + t->Phi[69];
-    w->term[1][78] = w->term[1][78] + t->Phi[78];
-    w->term[1][79] = w->term[1][79] + t->Phi[79];
-    w->term[1][80] = w->term[1][80] + t->Phi[80];
-    w->term[1][81] = w->term[1][81] + t->Phi[81];
-    w->term[1][82] = w->term[1][82] + t->Phi[82];
-    w->term[1][83] = w->term[1][83] + t->Phi[83];
-    w->term[1][92] = w->term[1][92] + t->Phi[92];
-    w->term[1][93] = w->term[1][93] + t->Phi[93];
-    w->term[1][94] = w->term[1][94] + t->Phi[94];
-    w->term[1][95] = w->term[1][95] + t->Phi[95];
-    w->term[1][96] = w->term[1][96] + t->Phi[96];
-    w->term[1][97] = w->term[1][97] + t->Phi[97];
-    w->term[1][107] = w->term[1][107] + t->Phi[107];
-    w->term[1][108] = w->term[1][108] + t->Phi[108];
-    w->term[1][109] = w->term[1][109] + t->Phi[109];
-    w->term[1][110] = w->term[1][110] + t->Phi[110];
-    w->term[1][111] = w->term[1][111] + t->Phi[111];
-    w->term[1][112] = w->term[1][112] + t->Phi[112];
-    w->term[1][121] = w->term[1][121] + t->Phi[121];
-    w->term[1][122] = w->term[1][122] + t->Phi[122];
-    w->term[1][123] = w->term[1][123] + t->Phi[123];
-    w->term[1][124] = w->term[1][124] + t->Phi[124];
-    w->term[1][125] = w->term[1][125] + t->Phi[125];
-    w->term[1][126] = w->term[1][126] + t->Phi[126];
-    t->Phi[0] = t->Phi[0] + t->Phi[0] + w->term[0][0];
-    t->Phi[1] = t->Phi[1] + t->Phi[1] + w->term[0][1];
-    t->Phi[2] = t->Phi[2] + t->Phi[2] + w->term[0][2];
-    t->Phi[3] = t->Phi[3] + t->Phi[3] + w->term[0][3];
-    t->Phi[4] = t->Phi[4] + t->Phi[4] + w->term[0][4];
-    t->Phi[5] = t->Phi[5] + t->Phi[5] + w->term[0][5];
-    t->Phi[6] = t->Phi[6] + t->Phi[6] + w->term[0][6];
-    t->Phi[7] = t->Phi[7] + t->Phi[7] + w->term[0][7];
-    t->Phi[8] = t->Phi[8] + t->Phi[8] + w->term[0][8];
-    t->Phi[9] = t->Phi[9] + t->Phi[9] + w->term[0][9];
-    t->Phi[10] = t->Phi[10] + t->Phi[10] + w->term[0][10];
-    t->Phi[11] = t->Phi[11] + t->Phi[11] + w->term[0][11];
-    t->Phi[12] = t->Phi[12] + t->Phi[12] + w->term[0][12];
-    t->Phi[13] = t->Phi[13] + t->Phi[13] + w->term[0][13];
-    t->Phi[14] = t->Phi[14] + t->Phi[14] + w->term[0][14];
-    t->Phi[15] = t->Phi[15] + t->Phi[15] + w->term[0][15];
-    t->Phi[16] = t->Phi[16] + t->Phi[16] + w->term[0][16];
-    t->Phi[17] = t->Phi[17] + t->Phi[17] + w->term[0][17];
-    t->Phi[18] = t->Phi[18] + t->Phi[18] + w->term[0][18];
-    t->Phi[19] = t->Phi[19] + t->Phi[19] + w->term[0][19];
-    t->Phi[20] = t->Phi[20] + t->Phi[20] + w->term[0][20];
-    t->Phi[21] = t->Phi[21] + t->Phi[21] + w->term[0][21];
-    t->Phi[22] = t->Phi[22] + t->Phi[22] + w->term[0][22];
-    t->Phi[23] = t->Phi[23] + t->Phi[23] + w->term[0][23];
-    t->Phi[24] = t->Phi[24] + t->Phi[24] + w->term[0][24];
-    t->Phi[25] = t->Phi[25] + t->Phi[25] + w->term[0][25];
-    t->Phi[26] = t->Phi[26] + t->Phi[26] + w->term[0][26];
-    t->Phi[27] = t->Phi[27] + t->Phi[27] + w->term[0][27];
-    t->Phi[28] = t->Phi[28] + t->Phi[28] + w->term[0][28];
-    t->Phi[29] = t->Phi[29] + t->Phi[29] + w->term[0][29];
-    t->Phi[30] = t->Phi[30] + t->Phi[30] + w->term[0][30];
-    t->Phi[31] = t->Phi[31] + t->Phi[31] + w->term[0][31];
-    t->Phi[32] = t->Phi[32] + t->Phi[32] + w->term[0][32];
-    t->Phi[33] = t->Phi[33] + t->Phi[33] + w->term[0][33];
-    t->Phi[34] = t->Phi[34] + t->Phi[34] + w->term[0][34];
-    t->Phi[35] = t->Phi[35] + t->Phi[35] + w->term[0][35];
-    t->Phi[36] = t->Phi[36] + t->Phi[36] + w->term[0][36];
-    t->Phi[37] = t->Phi[37] + t->Phi[37] + w->term[0][37];
-    t->Phi[38] = t->Phi[38] + t->Phi[38] + w->term[0][38];
-    t->Phi[39] = t->Phi[39] + t->Phi[39] + w->term[0][39];
-    t->Phi[40] = t->Phi[40] + t->Phi[40] + w->term[0][40];
-    t->Phi[41] = t->Phi[41] + t->Phi[41] + w->term[0][41];
-    t->Phi[42] = t->Phi[42] + t->Phi[42] + w->term[0][42];
-    t->Phi[43] = t->Phi[43] + t->Phi[43] + w->term[0][43];
-    t->Phi[44] = t->Phi[44] + t->Phi[44] + w->term[0][44];
-    t->Phi[45] = t->Phi[45] + t->Phi[45] + w->term[0][45];
-    t->Phi[46] = t->Phi[46] + t->Phi[46] + w->term[0][46];
-    t->Phi[47] = t->Phi[47] + t->Phi[47] + w->term[0][47];
-    t->Phi[48] = t->Phi[48] + t->Phi[48] + w->term[0][48];
-    t->Phi[49] = t->Phi[49] + t->Phi[49] + w->term[0][49];
-    t->Phi[50] = t->Phi[50] + t->Phi[50] + w->term[0][50];
-    t->Phi[51] = t->Phi[51] + t->Phi[51] + w->term[0][51];
-    t->Phi[52] = t->Phi[52] + t->Phi[52] + w->term[0][52];
-    t->Phi[53] = t->Phi[53] + t->Phi[53] + w->term[0][53];
-    t->Phi[54] = t->Phi[54] + t->Phi[54] + w->term[0][54];
-    t->Phi[55] = t->Phi[55] + t->Phi[55] + w->term[0][55];
-    t->Phi[56] = t->Phi[56] + t->Phi[56] + w->term[0][56];
-    t->Phi[57] = t->Phi[57] + t->Phi[57] + w->term[0][57];
-    t->Phi[58] = t->Phi[58] + t->Phi[58] + w->term[0][58];
-    t->Phi[59] = t->Phi[59] + t->Phi[59] + w->term[0][59];
-    t->Phi[60] = t->Phi[60] + t->Phi[60] + w->term[0][60];
-    t->Phi[61] = t->Phi[61] + t->Phi[61] + w->term[0][61];
-    t->Phi[62] = t->Phi[62] + t->Phi[62] + w->term[0][62];
-    t->Phi[63] = t->Phi[63] + t->Phi[63] + w->term[0][63];
-    t->Phi[64] = t->Phi[64] + t->Phi[64] + w->term[0][64];
-    t->Phi[65] = t->Phi[65] + t->Phi[65] + w->term[0][65];
-    t->Phi[66] = t->Phi[66] + t->Phi[66] + w->term[0][66];
-    t->Phi[67] = t->Phi[67] + t->Phi[67] + w->term[0][67];
-    t->Phi[68] = t->Phi[68] + t->Phi[68] + w->term[0][68];
-    t->Phi[69] = t->Phi[69] + t->Phi[69] + w->term[0][69];
-    t->Phi[70] = t->Phi[70] + t->Phi[70] + w->term[0][70];
-    t->Phi[71] = t->Phi[71] + t->Phi[71] + w->term[0][71];
-    t->Phi[72] = t->Phi[72] + t->Phi[72] + w->term[0][72];
-    t->Phi[73] = t->Phi[73] + t->Phi[73] + w->term[0][73];
-    t->Phi[74] = t->Phi[74] + t->Phi[74] + w->term[0][74];
-    t->Phi[75] = t->Phi[75] + t->Phi[75] + w->term[0][75];
-    t->Phi[76] = t->Phi[76] + t->Phi[76] + w->term[0][76];
-    t->Phi[77] = t->Phi[77] + t->Phi[77] + w->term[0][77];
-    t->Phi[78] = t->Phi[78] + t->Phi[78] + w->term[0][78];
-    t->Phi[79] = t->Phi[79] + t->Phi[79] + w->term[0][79];
-    t->Phi[80] = t->Phi[80] + t->Phi[80] + w->term[0][80];
-    t->Phi[81] = t->Phi[81] + t->Phi[81] + w->term[0][81];
-    t->Phi[82] = t->Phi[82] + t->Phi[82] + w->term[0][82];
-    t->Phi[83] = t->Phi[83] + t->Phi[83] + w->term[0][83];
-    t->Phi[84] = t->Phi[84] + t->Phi[84] + w->term[0][84];
-    t->Phi[85] = t->Phi[85] + t->Phi[85] + w->term[0][85];
-    t->Phi[86] = t->Phi[86] + t->Phi[86] + w->term[0][86];
-    t->Phi[87] = t->Phi[87] + t->Phi[87] + w->term[0][87];
-    t->Phi[88] = t->Phi[88] + t->Phi[88] + w->term[0][88];
-    t->Phi[89] = t->Phi[89] + t->Phi[89] + w->term[0][89];
-    t->Phi[90] = t->Phi[90] + t->Phi[90] + w->term[0][90];
-    t->Phi[91] = t->Phi[91] + t->Phi[91] + w->term[0][91];
-    t->Phi[92] = t->Phi[92] + t->Phi[92] + w->term[0][92];
-    t->Phi[93] = t->Phi[93] + t->Phi[93] + w->term[0][93];
-    t->Phi[94] = t->Phi[94] + t->Phi[94] + w->term[0][94];
-    t->Phi[95] = t->Phi[95] + t->Phi[95] + w->term[0][95];
-    t->Phi[96] = t->Phi[96] + t->Phi[96] + w->term[0][96];
-    t->Phi[97] = t->Phi[97] + t->Phi[97] + w->term[0][97];
-    t->Phi[98] = t->Phi[98] + t->Phi[98] + w->term[0][98];
-    t->Phi[99] = t->Phi[99] + t->Phi[99] + w->term[0][99];
-    t->Phi[100] = t->Phi[100] + t->Phi[100] + w->term[0][100];
-    t->Phi[101] = t->Phi[101] + t->Phi[101] + w->term[0][101];
-    t->Phi[102] = t->Phi[102] + t->Phi[102] + w->term[0][102];
-    t->Phi[103] = t->Phi[103] + t->Phi[103] + w->term[0][103];
-    t->Phi[104] = t->Phi[104] + t->Phi[104] + w->term[0][104];
-    t->Phi[105] = t->Phi[105] + t->Phi[105] + w->term[0][105];
-    t->Phi[106] = t->Phi[106] + t->Phi[106] + w->term[0][106];
-    t->Phi[107] = t->Phi[107] + t->Phi[107] + w->term[0][107];
-    t->Phi[108] = t->Phi[108] + t->Phi[108] + w->term[0][108];
-    t->Phi[109] = t->Phi[109] + t->Phi[109] + w->term[0][109];
-    t->Phi[110] = t->Phi[110] + t->Phi[110] + w->term[0][110];
-    t->Phi[111] = t->Phi[111] + t->Phi[111] + w->term[0][111];
-    t->Phi[112] = t->Phi[112] + t->Phi[112] + w->term[0][112];
-    t->Phi[113] = t->Phi[113] + t->Phi[113] + w->term[0][113];
-    t->Phi[114] = t->Phi[114] + t->Phi[114] + w->term[0][114];
-    t->Phi[115] = t->Phi[115] + t->Phi[115] + w->term[0][115];
-    t->Phi[116] = t->Phi[116] + t->Phi[116] + w->term[0][116];
-    t->Phi[117] = t->Phi[117] + t->Phi[117] + w->term[0][117];
-    t->Phi[118] = t->Phi[118] + t->Phi[118] + w->term[0][118];
-    t->Phi[119] = t->Phi[119] + t->Phi[119] + w->term[0][119];
-    t->Phi[120] = t->Phi[120] + t->Phi[120] + w->term[0][120];
-    t->Phi[121] = t->Phi[121] + t->Phi[121] + w->term[0][121];
-    t->Phi[122] = t->Phi[122] + t->Phi[122] + w->term[0][122];
-    t->Phi[123] = t->Phi[123] + t->Phi[123] + w->term[0][123];
-    t->Phi[124] = t->Phi[124] + t->Phi[124] + w->term[0][124];
-    t->Phi[125] = t->Phi[125] + t->Phi[125] + w->term[0][125];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][8]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[8]));
+        lane_pair_store(&w->term[1][8], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][10]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[10]));
+        lane_pair_store(&w->term[1][10], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][12]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[12]));
+        lane_pair_store(&w->term[1][12], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][22]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[22]));
+        lane_pair_store(&w->term[1][22], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][24]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[24]));
+        lane_pair_store(&w->term[1][24], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][26]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[26]));
+        lane_pair_store(&w->term[1][26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][36]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[36]));
+        lane_pair_store(&w->term[1][36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][38]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[38]));
+        lane_pair_store(&w->term[1][38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][40]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[40]));
+        lane_pair_store(&w->term[1][40], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][50]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[50]));
+        lane_pair_store(&w->term[1][50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][52]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[52]));
+        lane_pair_store(&w->term[1][52], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][54]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[54]));
+        lane_pair_store(&w->term[1][54], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][64]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[64]));
+        lane_pair_store(&w->term[1][64], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][66]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[66]));
+        lane_pair_store(&w->term[1][66], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][68]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[68]));
+        lane_pair_store(&w->term[1][68], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][78]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[78]));
+        lane_pair_store(&w->term[1][78], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][80]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[80]));
+        lane_pair_store(&w->term[1][80], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][82]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[82]));
+        lane_pair_store(&w->term[1][82], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][92]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[92]));
+        lane_pair_store(&w->term[1][92], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][94]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[94]));
+        lane_pair_store(&w->term[1][94], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][96]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[96]));
+        lane_pair_store(&w->term[1][96], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][107]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[107]));
+        lane_pair_store(&w->term[1][107], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][109]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[109]));
+        lane_pair_store(&w->term[1][109], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][111]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[111]));
+        lane_pair_store(&w->term[1][111], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][121]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[121]));
+        lane_pair_store(&w->term[1][121], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][123]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[123]));
+        lane_pair_store(&w->term[1][123], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][125]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[125]));
+        lane_pair_store(&w->term[1][125], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[0]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[0]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][0]));
+        lane_pair_store(&t->Phi[0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[2]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[2]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][2]));
+        lane_pair_store(&t->Phi[2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[4]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[4]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][4]));
+        lane_pair_store(&t->Phi[4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[6]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[6]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][6]));
+        lane_pair_store(&t->Phi[6], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[8]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[8]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][8]));
+        lane_pair_store(&t->Phi[8], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[10]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[10]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][10]));
+        lane_pair_store(&t->Phi[10], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[12]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[12]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][12]));
+        lane_pair_store(&t->Phi[12], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[14]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[14]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][14]));
+        lane_pair_store(&t->Phi[14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[16]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[16]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][16]));
+        lane_pair_store(&t->Phi[16], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[18]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[18]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][18]));
+        lane_pair_store(&t->Phi[18], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[20]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[20]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][20]));
+        lane_pair_store(&t->Phi[20], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[22]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[22]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][22]));
+        lane_pair_store(&t->Phi[22], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[24]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[24]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][24]));
+        lane_pair_store(&t->Phi[24], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[26]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[26]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][26]));
+        lane_pair_store(&t->Phi[26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[28]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[28]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][28]));
+        lane_pair_store(&t->Phi[28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[30]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[30]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][30]));
+        lane_pair_store(&t->Phi[30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[32]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[32]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][32]));
+        lane_pair_store(&t->Phi[32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[34]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[34]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][34]));
+        lane_pair_store(&t->Phi[34], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[36]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[36]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][36]));
+        lane_pair_store(&t->Phi[36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[38]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[38]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][38]));
+        lane_pair_store(&t->Phi[38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[40]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[40]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][40]));
+        lane_pair_store(&t->Phi[40], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[42]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[42]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][42]));
+        lane_pair_store(&t->Phi[42], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[44]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[44]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][44]));
+        lane_pair_store(&t->Phi[44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[46]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[46]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][46]));
+        lane_pair_store(&t->Phi[46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[48]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[48]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][48]));
+        lane_pair_store(&t->Phi[48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[50]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[50]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][50]));
+        lane_pair_store(&t->Phi[50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[52]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[52]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][52]));
+        lane_pair_store(&t->Phi[52], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[54]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[54]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][54]));
+        lane_pair_store(&t->Phi[54], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[56]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[56]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][56]));
+        lane_pair_store(&t->Phi[56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[58]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[58]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][58]));
+        lane_pair_store(&t->Phi[58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[60]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[60]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][60]));
+        lane_pair_store(&t->Phi[60], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[62]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[62]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][62]));
+        lane_pair_store(&t->Phi[62], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[64]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[64]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][64]));
+        lane_pair_store(&t->Phi[64], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[66]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[66]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][66]));
+        lane_pair_store(&t->Phi[66], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[68]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[68]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][68]));
+        lane_pair_store(&t->Phi[68], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[70]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[70]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][70]));
+        lane_pair_store(&t->Phi[70], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[72]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[72]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][72]));
+        lane_pair_store(&t->Phi[72], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[74]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[74]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][74]));
+        lane_pair_store(&t->Phi[74], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[76]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[76]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][76]));
+        lane_pair_store(&t->Phi[76], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[78]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[78]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][78]));
+        lane_pair_store(&t->Phi[78], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[80]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[80]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][80]));
+        lane_pair_store(&t->Phi[80], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[82]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[82]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][82]));
+        lane_pair_store(&t->Phi[82], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[84]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[84]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][84]));
+        lane_pair_store(&t->Phi[84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[86]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[86]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][86]));
+        lane_pair_store(&t->Phi[86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[88]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[88]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][88]));
+        lane_pair_store(&t->Phi[88], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[90]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[90]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][90]));
+        lane_pair_store(&t->Phi[90], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[92]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[92]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][92]));
+        lane_pair_store(&t->Phi[92], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[94]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[94]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][94]));
+        lane_pair_store(&t->Phi[94], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[96]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[96]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][96]));
+        lane_pair_store(&t->Phi[96], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[98]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[98]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][98]));
+        lane_pair_store(&t->Phi[98], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[100]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[100]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][100]));
+        lane_pair_store(&t->Phi[100], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[102]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[102]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][102]));
+        lane_pair_store(&t->Phi[102], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[104]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[104]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][104]));
+        lane_pair_store(&t->Phi[104], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[106]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[106]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][106]));
+        lane_pair_store(&t->Phi[106], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[108]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[108]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][108]));
+        lane_pair_store(&t->Phi[108], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[110]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[110]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][110]));
+        lane_pair_store(&t->Phi[110], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[112]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[112]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][112]));
+        lane_pair_store(&t->Phi[112], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[114]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[114]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][114]));
+        lane_pair_store(&t->Phi[114], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[116]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[116]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][116]));
+        lane_pair_store(&t->Phi[116], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[118]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[118]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][118]));
+        lane_pair_store(&t->Phi[118], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[120]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[120]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][120]));
+        lane_pair_store(&t->Phi[120], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[122]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[122]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][122]));
+        lane_pair_store(&t->Phi[122], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[124]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[124]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][124]));
+        lane_pair_store(&t->Phi[124], pair);
+    }
     t->Phi[126] = t->Phi[126] + t->Phi[126] + w->term[0][126];
-    w->S[0] = w->S[0] + half*w->term[1][0];
-    w->S[1] = w->S[1] + half*w->term[1][1];
-    w->S[2] = w->S[2] + half*w->term[1][2];
-    w->S[3] = w->S[3] + half*w->term[1][3];
-    w->S[4] = w->S[4] + half*w->term[1][4];
-    w->S[5] = w->S[5] + half*w->term[1][5];
-    w->S[6] = w->S[6] + half*w->term[1][6];
-    w->S[7] = w->S[7] + half*w->term[1][7];
-    w->S[72] = w->S[72] + half*w->term[1][8];
-    w->S[73] = w->S[73] + half*w->term[1][9];
-    w->S[74] = w->S[74] + half*w->term[1][10];
-    w->S[75] = w->S[75] + half*w->term[1][11];
-    w->S[76] = w->S[76] + half*w->term[1][12];
-    w->S[77] = w->S[77] + half*w->term[1][13];
-    w->S[8] = w->S[8] + half*w->term[1][14];
-    w->S[9] = w->S[9] + half*w->term[1][15];
-    w->S[10] = w->S[10] + half*w->term[1][16];
-    w->S[11] = w->S[11] + half*w->term[1][17];
-    w->S[12] = w->S[12] + half*w->term[1][18];
-    w->S[13] = w->S[13] + half*w->term[1][19];
-    w->S[14] = w->S[14] + half*w->term[1][20];
-    w->S[15] = w->S[15] + half*w->term[1][21];
-    w->S[78] = w->S[78] + half*w->term[1][22];
-    w->S[79] = w->S[79] + half*w->term[1][23];
-    w->S[80] = w->S[80] + half*w->term[1][24];
-    w->S[81] = w->S[81] + half*w->term[1][25];
-    w->S[82] = w->S[82] + half*w->term[1][26];
-    w->S[83] = w->S[83] + half*w->term[1][27];
-    w->S[16] = w->S[16] + half*w->term[1][28];
-    w->S[17] = w->S[17] + half*w->term[1][29];
-    w->S[18] = w->S[18] + half*w->term[1][30];
-    w->S[19] = w->S[19] + half*w->term[1][31];
-    w->S[20] = w->S[20] + half*w->term[1][32];
-    w->S[21] = w->S[21] + half*w->term[1][33];
-    w->S[22] = w->S[22] + half*w->term[1][34];
-    w->S[23] = w->S[23] + half*w->term[1][35];
-    w->S[84] = w->S[84] + half*w->term[1][36];
-    w->S[85] = w->S[85] + half*w->term[1][37];
-    w->S[86] = w->S[86] + half*w->term[1][38];
-    w->S[87] = w->S[87] + half*w->term[1][39];
-    w->S[88] = w->S[88] + half*w->term[1][40];
-    w->S[89] = w->S[89] + half*w->term[1][41];
-    w->S[24] = w->S[24] + half*w->term[1][42];
-    w->S[25] = w->S[25] + half*w->term[1][43];
-    w->S[26] = w->S[26] + half*w->term[1][44];
-    w->S[27] = w->S[27] + half*w->term[1][45];
-    w->S[28] = w->S[28] + half*w->term[1][46];
-    w->S[29] = w->S[29] + half*w->term[1][47];
-    w->S[30] = w->S[30] + half*w->term[1][48];
-    w->S[31] = w->S[31] + half*w->term[1][49];
-    w->S[90] = w->S[90] + half*w->term[1][50];
-    w->S[91] = w->S[91] + half*w->term[1][51];
-    w->S[92] = w->S[92] + half*w->term[1][52];
-    w->S[93] = w->S[93] + half*w->term[1][53];
-    w->S[94] = w->S[94] + half*w->term[1][54];
-    w->S[95] = w->S[95] + half*w->term[1][55];
-    w->S[32] = w->S[32] + half*w->term[1][56];
-    w->S[33] = w->S[33] + half*w->term[1][57];
-    w->S[34] = w->S[34] + half*w->term[1][58];
-    w->S[35] = w->S[35] + half*w->term[1][59];
-    w->S[36] = w->S[36] + half*w->term[1][60];
-    w->S[37] = w->S[37] + half*w->term[1][61];
-    w->S[38] = w->S[38] + half*w->term[1][62];
-    w->S[39] = w->S[39] + half*w->term[1][63];
-    w->S[96] = w->S[96] + half*w->term[1][64];
-    w->S[97] = w->S[97] + half*w->term[1][65];
-    w->S[98] = w->S[98] + half*w->term[1][66];
-    w->S[99] = w->S[99] + half*w->term[1][67];
-    w->S[100] = w->S[100] + half*w->term[1][68];
-    w->S[101] = w->S[101] + half*w->term[1][69];
-    w->S[40] = w->S[40] + half*w->term[1][70];
-    w->S[41] = w->S[41] + half*w->term[1][71];
-    w->S[42] = w->S[42] + half*w->term[1][72];
-    w->S[43] = w->S[43] + half*w->term[1][73];
-    w->S[44] = w->S[44] + half*w->term[1][74];
-    w->S[45] = w->S[45] + half*w->term[1][75];
-    w->S[46] = w->S[46] + half*w->term[1][76];
-    w->S[47] = w->S[47] + half*w->term[1][77];
-    w->S[102] = w->S[102] + half*w->term[1][78];
-    w->S[103] = w->S[103] + half*w->term[1][79];
-    w->S[104] = w->S[104] + half*w->term[1][80];
-    w->S[105] = w->S[105] + half*w->term[1][81];
-    w->S[106] = w->S[106] + half*w->term[1][82];
-    w->S[107] = w->S[107] + half*w->term[1][83];
-    w->S[48] = w->S[48] + half*w->term[1][84];
-    w->S[49] = w->S[49] + half*w->term[1][85];
-    w->S[50] = w->S[50] + half*w->term[1][86];
-    w->S[51] = w->S[51] + half*w->term[1][87];
-    w->S[52] = w->S[52] + half*w->term[1][88];
-    w->S[53] = w->S[53] + half*w->term[1][89];
-    w->S[54] = w->S[54] + half*w->term[1][90];
-    w->S[55] = w->S[55] + half*w->term[1][91];
-    w->S[108] = w->S[108] + half*w->term[1][92];
-    w->S[109] = w->S[109] + half*w->term[1][93];
-    w->S[110] = w->S[110] + half*w->term[1][94];
-    w->S[111] = w->S[111] + half*w->term[1][95];
-    w->S[112] = w->S[112] + half*w->term[1][96];
-    w->S[113] = w->S[113] + half*w->term[1][97];
-    w->S[56] = w->S[56] + half*w->term[1][98];
-    w->S[57] = w->S[57] + half*w->term[1][99];
-    w->S[58] = w->S[58] + half*w->term[1][100];
-    w->S[59] = w->S[59] + half*w->term[1][101];
-    w->S[60] = w->S[60] + half*w->term[1][102];
-    w->S[61] = w->S[61] + half*w->term[1][103];
+    {
+        lane_pair pair = lane_pair_load(&w->S[0]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][0]));
+        lane_pair_store(&w->S[0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[2]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][2]));
+        lane_pair_store(&w->S[2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[4]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][4]));
+        lane_pair_store(&w->S[4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[6]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][6]));
+        lane_pair_store(&w->S[6], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[72]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][8]));
+        lane_pair_store(&w->S[72], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[74]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][10]));
+        lane_pair_store(&w->S[74], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[76]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][12]));
+        lane_pair_store(&w->S[76], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[8]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][14]));
+        lane_pair_store(&w->S[8], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[10]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][16]));
+        lane_pair_store(&w->S[10], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[12]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][18]));
+        lane_pair_store(&w->S[12], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[14]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][20]));
+        lane_pair_store(&w->S[14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[78]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][22]));
+        lane_pair_store(&w->S[78], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[80]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][24]));
+        lane_pair_store(&w->S[80], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[82]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][26]));
+        lane_pair_store(&w->S[82], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[16]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][28]));
+        lane_pair_store(&w->S[16], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[18]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][30]));
+        lane_pair_store(&w->S[18], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[20]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][32]));
+        lane_pair_store(&w->S[20], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[22]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][34]));
+        lane_pair_store(&w->S[22], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[84]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][36]));
+        lane_pair_store(&w->S[84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[86]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][38]));
+        lane_pair_store(&w->S[86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[88]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][40]));
+        lane_pair_store(&w->S[88], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[24]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][42]));
+        lane_pair_store(&w->S[24], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[26]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][44]));
+        lane_pair_store(&w->S[26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[28]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][46]));
+        lane_pair_store(&w->S[28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[30]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][48]));
+        lane_pair_store(&w->S[30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[90]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][50]));
+        lane_pair_store(&w->S[90], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[92]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][52]));
+        lane_pair_store(&w->S[92], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[94]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][54]));
+        lane_pair_store(&w->S[94], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[32]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][56]));
+        lane_pair_store(&w->S[32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[34]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][58]));
+        lane_pair_store(&w->S[34], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[36]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][60]));
+        lane_pair_store(&w->S[36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[38]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][62]));
+        lane_pair_store(&w->S[38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[96]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][64]));
+        lane_pair_store(&w->S[96], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[98]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][66]));
+        lane_pair_store(&w->S[98], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[100]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][68]));
+        lane_pair_store(&w->S[100], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[40]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][70]));
+        lane_pair_store(&w->S[40], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[42]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][72]));
+        lane_pair_store(&w->S[42], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[44]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][74]));
+        lane_pair_store(&w->S[44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[46]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][76]));
+        lane_pair_store(&w->S[46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[102]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][78]));
+        lane_pair_store(&w->S[102], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[104]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][80]));
+        lane_pair_store(&w->S[104], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[106]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][82]));
+        lane_pair_store(&w->S[106], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[48]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][84]));
+        lane_pair_store(&w->S[48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[50]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][86]));
+        lane_pair_store(&w->S[50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[52]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][88]));
+        lane_pair_store(&w->S[52], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[54]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][90]));
+        lane_pair_store(&w->S[54], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[108]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][92]));
+        lane_pair_store(&w->S[108], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[110]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][94]));
+        lane_pair_store(&w->S[110], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[112]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][96]));
+        lane_pair_store(&w->S[112], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[56]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][98]));
+        lane_pair_store(&w->S[56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[58]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][100]));
+        lane_pair_store(&w->S[58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[60]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][102]));
+        lane_pair_store(&w->S[60], pair);
+    }
     w->S[62] = w->S[62] + half*w->term[1][104];
     w->S[114] = w->S[114] + half*w->term[1][105];
     w->S[63] = w->S[63] + half*w->term[1][106];
-    w->S[115] = w->S[115] + half*w->term[1][107];
-    w->S[116] = w->S[116] + half*w->term[1][108];
-    w->S[117] = w->S[117] + half*w->term[1][109];
-    w->S[118] = w->S[118] + half*w->term[1][110];
-    w->S[119] = w->S[119] + half*w->term[1][111];
-    w->S[120] = w->S[120] + half*w->term[1][112];
-    w->S[64] = w->S[64] + half*w->term[1][113];
-    w->S[65] = w->S[65] + half*w->term[1][114];
-    w->S[66] = w->S[66] + half*w->term[1][115];
-    w->S[67] = w->S[67] + half*w->term[1][116];
-    w->S[68] = w->S[68] + half*w->term[1][117];
-    w->S[69] = w->S[69] + half*w->term[1][118];
-    w->S[70] = w->S[70] + half*w->term[1][119];
-    w->S[71] = w->S[71] + half*w->term[1][120];
-    w->S[121] = w->S[121] + half*w->term[1][121];
-    w->S[122] = w->S[122] + half*w->term[1][122];
-    w->S[123] = w->S[123] + half*w->term[1][123];
-    w->S[124] = w->S[124] + half*w->term[1][124];
-    w->S[125] = w->S[125] + half*w->term[1][125];
-    w->S[126] = w->S[126] + half*w->term[1][126];
+    {
+        lane_pair pair = lane_pair_load(&w->S[115]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][107]));
+        lane_pair_store(&w->S[115], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[117]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][109]));
+        lane_pair_store(&w->S[117], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[119]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][111]));
+        lane_pair_store(&w->S[119], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[64]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][113]));
+        lane_pair_store(&w->S[64], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[66]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][115]));
+        lane_pair_store(&w->S[66], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[68]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][117]));
+        lane_pair_store(&w->S[68], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[70]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][119]));
+        lane_pair_store(&w->S[70], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[121]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][121]));
+        lane_pair_store(&w->S[121], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[123]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][123]));
+        lane_pair_store(&w->S[123], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[125]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][125]));
+        lane_pair_store(&w->S[125], pair);
+    }
 }
 
 INS_GPS15_TWIN_BLOCK ins_gps15_twin_scalar transition_check(ins_gps15_twin_transition *restrict t,
@@ -2524,80 +3509,43 @@ INS_GPS15_TWIN_BLOCK void process_noise(const ins_gps15_twin_matrices *restrict 
     w->term[1][51] = w->term[0][51]*w->term[1][57];
     w->term[1][52] = w->term[0][52]*w->term[1][58];
     w->term[1][53] = w->term[0][53]*w->term[1][59];
-    t->Qd[9] = 0;
-    t->Qd[10] = 0;
-    t->Qd[11] = 0;
-    t->Qd[12] = 0;
-    t->Qd[13] = 0;
-    t->Qd[14] = 0;
-    t->Qd[23] = 0;
-    t->Qd[24] = 0;
-    t->Qd[25] = 0;
-    t->Qd[26] = 0;
-    t->Qd[27] = 0;
-    t->Qd[28] = 0;
-    t->Qd[36] = 0;
-    t->Qd[37] = 0;
-    t->Qd[38] = 0;
-    t->Qd[39] = 0;
-    t->Qd[40] = 0;
-    t->Qd[41] = 0;
-    t->Qd[48] = 0;
-    t->Qd[49] = 0;
-    t->Qd[50] = 0;
-    t->Qd[51] = 0;
-    t->Qd[52] = 0;
-    t->Qd[53] = 0;
-    t->Qd[59] = 0;
-    t->Qd[60] = 0;
-    t->Qd[61] = 0;
-    t->Qd[62] = 0;
-    t->Qd[63] = 0;
-    t->Qd[64] = 0;
-    t->Qd[69] = 0;
-    t->Qd[70] = 0;
-    t->Qd[71] = 0;
-    t->Qd[72] = 0;
-    t->Qd[73] = 0;
-    t->Qd[74] = 0;
-    t->Qd[78] = 0;
-    t->Qd[79] = 0;
-    t->Qd[80] = 0;
-    t->Qd[81] = 0;
-    t->Qd[82] = 0;
-    t->Qd[83] = 0;
-    t->Qd[86] = 0;
-    t->Qd[87] = 0;
-    t->Qd[88] = 0;
-    t->Qd[89] = 0;
-    t->Qd[90] = 0;
-    t->Qd[91] = 0;
-    t->Qd[93] = 0;
-    t->Qd[94] = 0;
-    t->Qd[95] = 0;
-    t->Qd[96] = 0;
-    t->Qd[97] = 0;
-    t->Qd[98] = 0;
-    t->Qd[99] = 0;
-    t->Qd[100] = 0;
-    t->Qd[101] = 0;
-    t->Qd[102] = 0;
-    t->Qd[103] = 0;
-    t->Qd[104] = 0;
-    t->Qd[105] = 0;
-    t->Qd[106] = 0;
-    t->Qd[107] = 0;
-    t->Qd[108] = 0;
-    t->Qd[109] = 0;
-    t->Qd[110] = 0;
-    t->Qd[111] = 0;
-    t->Qd[112] = 0;
-    t->Qd[113] = 0;
-    t->Qd[114] = 0;
-    t->Qd[115] = 0;
-    t->Qd[116] = 0;
-    t->Qd[117] = 0;
-    t->Qd[118] = 0;
+    lane_pair_store(&t->Qd[9], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[11], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[13], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[23], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[25], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[27], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[36], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[38], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[40], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[48], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[50], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[52], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[59], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[61], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[63], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[69], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[71], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[73], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[78], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[80], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[82], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[86], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[88], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[90], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[93], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[95], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[97], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[99], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[101], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[103], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[105], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[107], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[109], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[111], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[113], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[115], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[117], lane_pair_of(0, 0));
     t->Qd[119] = 0;
 }
 

@@ -181,10 +181,9 @@ typedef struct {
 /* Scratch memory of discretize. */
 typedef struct {
     ins_gps15_twin_scalar term[2][INS_GPS15_TWIN_N_TERMS]; /* the Horner chain's odd levels R_k
-            (term[1]); the doubling's new values; S G */
+            (term[1]) and F h (term[0], each entry twice); the doubling's new values; S G */
     ins_gps15_twin_scalar S[INS_GPS15_TWIN_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! (and the
             even levels R_k): each block row's dense segment, then the diagonal rows */
-    ins_gps15_twin_scalar fh[INS_GPS15_TWIN_NNZ_F]; /* F h at the nonzeros of F */
     ins_gps15_twin_scalar row_sum[INS_GPS15_TWIN_N_STATES]; /* balancing: off-diagonal row sums of
             D^-1 |F| D */
     ins_gps15_twin_scalar col_sum[INS_GPS15_TWIN_N_STATES]; /* balancing: off-diagonal column sums

@@ -355,32 +355,53 @@ static const signed char balance_exponent[NED_DOPPLER13_REDUCED_N_STATES] = { -3
    power of two.  A plan on it that needs a doubling is retaken on rebalanced_norm. */
 static ned_doppler13_reduced_scalar balanced_norm(const ned_doppler13_reduced_matrices *restrict m)
 {
-    ned_doppler13_reduced_scalar v, norm = 0.0;
-    v = fabs(m->F[0]) * 2.0 + fabs(m->F[1]) * 2.0 + fabs(m->F[2]) * 16384.0 + fabs(m->F[3]) * 8.0 +
-            fabs(m->F[4]) * 7.275957614183426e-12 + fabs(m->F[5]) * 7.275957614183426e-12 +
-            fabs(m->F[6]) * 7.275957614183426e-12 + fabs(m->F[7]) * 7.275957614183426e-12;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[8]) * 0.5 + fabs(m->F[9]) + fabs(m->F[10]) * 2048.0 + fabs(m->F[11]) *
-            3.637978807091713e-12 + fabs(m->F[12]) * 3.637978807091713e-12 + fabs(m->F[13]) *
-            3.637978807091713e-12 + fabs(m->F[14]) * 3.637978807091713e-12;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[15]) * 0.5 + fabs(m->F[16]) + fabs(m->F[17]) * 8192.0 + fabs(m->F[18]) * 4.0 +
-            fabs(m->F[19]) * 3.637978807091713e-12 + fabs(m->F[20]) * 3.637978807091713e-12 +
-            fabs(m->F[21]) * 3.637978807091713e-12 + fabs(m->F[22]) * 3.637978807091713e-12;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[23]) * 0.00048828125 + fabs(m->F[24]) * 0.00048828125 + fabs(m->F[25]) +
-            fabs(m->F[26]) * 4.0 + fabs(m->F[27]) * 0.001953125;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[28]) * 6.103515625e-05 + fabs(m->F[29]) * 0.0001220703125 + fabs(m->F[30]) * 0.25
-            + fabs(m->F[31]) + fabs(m->F[32]) * 0.00048828125;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[33]) * 512.0;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[34]) * 1.862645149230957e-09 + fabs(m->F[35]) * 9.094947017729282e-13;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[36]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[37]);
+    ned_doppler13_reduced_scalar norm = 0.0;
+    lane_pair lanes;
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[0]), fabs(m->F[15])), lane_pair_of(2.0, 0.5));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[1]), fabs(m->F[16])),
+            lane_pair_of(2.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[2]), fabs(m->F[17])),
+            lane_pair_of(16384.0, 8192.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[3]), fabs(m->F[18])),
+            lane_pair_of(8.0, 4.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[4]), fabs(m->F[19])),
+            lane_pair_of(7.275957614183426e-12, 3.637978807091713e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[5]), fabs(m->F[20])),
+            lane_pair_of(7.275957614183426e-12, 3.637978807091713e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[6]), fabs(m->F[21])),
+            lane_pair_of(7.275957614183426e-12, 3.637978807091713e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[7]), fabs(m->F[22])),
+            lane_pair_of(7.275957614183426e-12, 3.637978807091713e-12));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[8]), fabs(m->F[23])), lane_pair_of(0.5,
+            0.00048828125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[9]), fabs(m->F[24])),
+            lane_pair_of(1.0, 0.00048828125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[10]), fabs(m->F[25])),
+            lane_pair_of(2048.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[11]), fabs(m->F[26])),
+            lane_pair_of(3.637978807091713e-12, 4.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[12]), fabs(m->F[27])),
+            lane_pair_of(3.637978807091713e-12, 0.001953125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[13]), 0.0),
+            lane_pair_of(3.637978807091713e-12, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[14]), 0.0),
+            lane_pair_of(3.637978807091713e-12, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[28]), fabs(m->F[34])),
+            lane_pair_of(6.103515625e-05, 1.862645149230957e-09));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[29]), fabs(m->F[35])),
+            lane_pair_of(0.0001220703125, 9.094947017729282e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[30]), 0.0), lane_pair_of(0.25,
+            1.0));
+    lanes = lane_pair_add(lanes, lane_pair_of(fabs(m->F[31]), 0.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[32]), 0.0),
+            lane_pair_of(0.00048828125, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[33]), fabs(m->F[36])), lane_pair_of(512.0,
+            1.0));
+    norm = lane_pair_max(lanes, norm);
+    const ned_doppler13_reduced_scalar v = fabs(m->F[37]);
     norm = v > norm ? v : norm;
     return norm;
 }
@@ -391,9 +412,13 @@ static ned_doppler13_reduced_scalar balanced_norm(const ned_doppler13_reduced_ma
            balancing
    in powers of two, starting from the fixed D (at the check operating point one sweep finds it a
            fixed
-   point) and stopped at a fixed point; the sums in the reference's order (row by row). */
-static ned_doppler13_reduced_scalar rebalanced_norm(const ned_doppler13_reduced_matrices *restrict
-        m, ned_doppler13_reduced_discretize_scratch *restrict w)
+   point) and stopped at a fixed point; the sums in the reference's order (row by row).
+   Not inlined: it runs only when a doubling is at stake, and inlined, gcc -O2 would keep
+   balanced_norm's |F_ij| on the stack for it on every call (bench/bench_cycle.py: 130
+   instructions at 18 states). */
+NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar rebalanced_norm(const
+        ned_doppler13_reduced_matrices *restrict m, ned_doppler13_reduced_discretize_scratch
+        *restrict w)
 {
     ned_doppler13_reduced_scalar v, norm = 0.0;
     signed char exponent[NED_DOPPLER13_REDUCED_N_STATES]; /* within [-40, 40] */
@@ -655,404 +680,662 @@ static int taylor_plan(const ned_doppler13_reduced_scalar norm, const ned_dopple
 NED_DOPPLER13_REDUCED_BLOCK void horner_input(const ned_doppler13_reduced_matrices *restrict m,
         ned_doppler13_reduced_discretize_scratch *restrict w, const ned_doppler13_reduced_scalar h)
 {
-    w->fh[0] = m->F[0]*h;
-    w->fh[1] = m->F[1]*h;
-    w->fh[2] = m->F[2]*h;
-    w->fh[3] = m->F[3]*h;
-    w->fh[4] = m->F[4]*h;
-    w->fh[5] = m->F[5]*h;
-    w->fh[6] = m->F[6]*h;
-    w->fh[7] = m->F[7]*h;
-    w->fh[8] = m->F[8]*h;
-    w->fh[9] = m->F[9]*h;
-    w->fh[10] = m->F[10]*h;
-    w->fh[11] = m->F[11]*h;
-    w->fh[12] = m->F[12]*h;
-    w->fh[13] = m->F[13]*h;
-    w->fh[14] = m->F[14]*h;
-    w->fh[15] = m->F[15]*h;
-    w->fh[16] = m->F[16]*h;
-    w->fh[17] = m->F[17]*h;
-    w->fh[18] = m->F[18]*h;
-    w->fh[19] = m->F[19]*h;
-    w->fh[20] = m->F[20]*h;
-    w->fh[21] = m->F[21]*h;
-    w->fh[22] = m->F[22]*h;
-    w->fh[23] = m->F[23]*h;
-    w->fh[24] = m->F[24]*h;
-    w->fh[25] = m->F[25]*h;
-    w->fh[26] = m->F[26]*h;
-    w->fh[27] = m->F[27]*h;
-    w->fh[28] = m->F[28]*h;
-    w->fh[29] = m->F[29]*h;
-    w->fh[30] = m->F[30]*h;
-    w->fh[31] = m->F[31]*h;
-    w->fh[32] = m->F[32]*h;
-    w->fh[33] = m->F[33]*h;
-    w->fh[34] = m->F[34]*h;
-    w->fh[35] = m->F[35]*h;
-    w->fh[36] = m->F[36]*h;
-    w->fh[37] = m->F[37]*h;
+    ned_doppler13_reduced_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
+    lane_pair_store(&fh_pairs[0], lane_pair_of(m->F[0]*h, m->F[0]*h));
+    lane_pair_store(&fh_pairs[2], lane_pair_of(m->F[1]*h, m->F[1]*h));
+    lane_pair_store(&fh_pairs[4], lane_pair_of(m->F[2]*h, m->F[2]*h));
+    lane_pair_store(&fh_pairs[6], lane_pair_of(m->F[3]*h, m->F[3]*h));
+    lane_pair_store(&fh_pairs[8], lane_pair_of(m->F[4]*h, m->F[4]*h));
+    lane_pair_store(&fh_pairs[10], lane_pair_of(m->F[5]*h, m->F[5]*h));
+    lane_pair_store(&fh_pairs[12], lane_pair_of(m->F[6]*h, m->F[6]*h));
+    lane_pair_store(&fh_pairs[14], lane_pair_of(m->F[7]*h, m->F[7]*h));
+    lane_pair_store(&fh_pairs[16], lane_pair_of(m->F[8]*h, m->F[8]*h));
+    lane_pair_store(&fh_pairs[18], lane_pair_of(m->F[9]*h, m->F[9]*h));
+    lane_pair_store(&fh_pairs[20], lane_pair_of(m->F[10]*h, m->F[10]*h));
+    lane_pair_store(&fh_pairs[22], lane_pair_of(m->F[11]*h, m->F[11]*h));
+    lane_pair_store(&fh_pairs[24], lane_pair_of(m->F[12]*h, m->F[12]*h));
+    lane_pair_store(&fh_pairs[26], lane_pair_of(m->F[13]*h, m->F[13]*h));
+    lane_pair_store(&fh_pairs[28], lane_pair_of(m->F[14]*h, m->F[14]*h));
+    lane_pair_store(&fh_pairs[30], lane_pair_of(m->F[15]*h, m->F[15]*h));
+    lane_pair_store(&fh_pairs[32], lane_pair_of(m->F[16]*h, m->F[16]*h));
+    lane_pair_store(&fh_pairs[34], lane_pair_of(m->F[17]*h, m->F[17]*h));
+    lane_pair_store(&fh_pairs[36], lane_pair_of(m->F[18]*h, m->F[18]*h));
+    lane_pair_store(&fh_pairs[38], lane_pair_of(m->F[19]*h, m->F[19]*h));
+    lane_pair_store(&fh_pairs[40], lane_pair_of(m->F[20]*h, m->F[20]*h));
+    lane_pair_store(&fh_pairs[42], lane_pair_of(m->F[21]*h, m->F[21]*h));
+    lane_pair_store(&fh_pairs[44], lane_pair_of(m->F[22]*h, m->F[22]*h));
+    lane_pair_store(&fh_pairs[46], lane_pair_of(m->F[23]*h, m->F[23]*h));
+    lane_pair_store(&fh_pairs[48], lane_pair_of(m->F[24]*h, m->F[24]*h));
+    lane_pair_store(&fh_pairs[50], lane_pair_of(m->F[25]*h, m->F[25]*h));
+    lane_pair_store(&fh_pairs[52], lane_pair_of(m->F[26]*h, m->F[26]*h));
+    lane_pair_store(&fh_pairs[54], lane_pair_of(m->F[27]*h, m->F[27]*h));
+    lane_pair_store(&fh_pairs[56], lane_pair_of(m->F[28]*h, m->F[28]*h));
+    lane_pair_store(&fh_pairs[58], lane_pair_of(m->F[29]*h, m->F[29]*h));
+    lane_pair_store(&fh_pairs[60], lane_pair_of(m->F[30]*h, m->F[30]*h));
+    lane_pair_store(&fh_pairs[62], lane_pair_of(m->F[31]*h, m->F[31]*h));
+    lane_pair_store(&fh_pairs[64], lane_pair_of(m->F[32]*h, m->F[32]*h));
+    lane_pair_store(&fh_pairs[66], lane_pair_of(m->F[33]*h, m->F[33]*h));
+    lane_pair_store(&fh_pairs[68], lane_pair_of(m->F[34]*h, m->F[34]*h));
+    lane_pair_store(&fh_pairs[70], lane_pair_of(m->F[35]*h, m->F[35]*h));
+    lane_pair_store(&fh_pairs[72], lane_pair_of(m->F[36]*h, m->F[36]*h));
+    lane_pair_store(&fh_pairs[74], lane_pair_of(m->F[37]*h, m->F[37]*h));
 }
 
 NED_DOPPLER13_REDUCED_BLOCK void horner_level_1_into_S(ned_doppler13_reduced_discretize_scratch
         *restrict w, const ned_doppler13_reduced_scalar c_out, const ned_doppler13_reduced_scalar
         c_in)
 {
+    const ned_doppler13_reduced_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     w->S[0] = c_out;
-    w->S[1] = w->fh[0]*c_in;
-    w->S[2] = w->fh[1]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[0], fh_pairs[2]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[1], pair);
+    }
     w->S[3] = 0;
-    w->S[4] = w->fh[2]*c_in;
-    w->S[5] = w->fh[3]*c_in;
-    w->S[6] = w->fh[6]*c_in;
-    w->S[7] = w->fh[7]*c_in;
-    w->S[8] = w->fh[8]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[4], fh_pairs[6]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[12], fh_pairs[14]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[6], pair);
+    }
+    w->S[8] = fh_pairs[16]*c_in;
     w->S[9] = c_out;
-    w->S[10] = w->fh[9]*c_in;
-    w->S[11] = w->fh[10]*c_in;
-    w->S[12] = 0;
-    w->S[13] = 0;
-    w->S[14] = w->fh[13]*c_in;
-    w->S[15] = w->fh[14]*c_in;
-    w->S[16] = w->fh[15]*c_in;
-    w->S[17] = w->fh[16]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[18], fh_pairs[20]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[10], pair);
+    }
+    lane_pair_store(&w->S[12], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[26], fh_pairs[28]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[30], fh_pairs[32]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[16], pair);
+    }
     w->S[18] = c_out;
     w->S[19] = 0;
-    w->S[20] = w->fh[17]*c_in;
-    w->S[21] = w->fh[18]*c_in;
-    w->S[22] = w->fh[21]*c_in;
-    w->S[23] = w->fh[22]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[34], fh_pairs[36]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[20], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[42], fh_pairs[44]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[22], pair);
+    }
     w->S[24] = 0;
-    w->S[25] = w->fh[23]*c_in;
-    w->S[26] = w->fh[24]*c_in;
-    w->S[27] = c_out + w->fh[25]*c_in;
-    w->S[28] = w->fh[26]*c_in;
-    w->S[29] = w->fh[27]*c_in;
-    w->S[30] = 0;
-    w->S[31] = 0;
-    w->S[32] = w->fh[28]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[46], fh_pairs[48]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[25], pair);
+    }
+    w->S[27] = c_out + fh_pairs[50]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[52], fh_pairs[54]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[28], pair);
+    }
+    lane_pair_store(&w->S[30], lane_pair_of(0, 0));
+    w->S[32] = fh_pairs[56]*c_in;
     w->S[33] = 0;
-    w->S[34] = w->fh[29]*c_in;
-    w->S[35] = w->fh[30]*c_in;
-    w->S[36] = c_out + w->fh[31]*c_in;
-    w->S[37] = w->fh[32]*c_in;
-    w->S[38] = 0;
-    w->S[39] = 0;
-    w->S[40] = 0;
-    w->S[41] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[58], fh_pairs[60]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[34], pair);
+    }
+    w->S[36] = c_out + fh_pairs[62]*c_in;
+    w->S[37] = fh_pairs[64]*c_in;
+    lane_pair_store(&w->S[38], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[40], lane_pair_of(0, 0));
     w->S[42] = 0;
-    w->S[43] = w->fh[33]*c_in;
+    w->S[43] = fh_pairs[66]*c_in;
     w->S[44] = 0;
     w->S[45] = c_out;
-    w->S[46] = 0;
-    w->S[47] = 0;
-    w->S[48] = 0;
-    w->S[49] = 0;
-    w->S[50] = 0;
-    w->S[51] = 0;
-    w->S[52] = w->fh[34]*c_in;
-    w->S[53] = w->fh[35]*c_in;
-    w->S[54] = 0;
-    w->S[55] = 0;
-    w->S[56] = c_out + w->fh[36]*c_in;
-    w->S[57] = c_out + w->fh[37]*c_in;
-    w->S[58] = w->fh[4]*c_in;
-    w->S[59] = w->fh[5]*c_in;
-    w->S[60] = w->fh[11]*c_in;
-    w->S[61] = w->fh[12]*c_in;
-    w->S[62] = w->fh[19]*c_in;
-    w->S[63] = w->fh[20]*c_in;
-    w->S[64] = 0;
-    w->S[65] = 0;
-    w->S[66] = 0;
-    w->S[67] = 0;
-    w->S[68] = 0;
-    w->S[69] = 0;
+    lane_pair_store(&w->S[46], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[48], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[50], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[68], fh_pairs[70]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[52], pair);
+    }
+    lane_pair_store(&w->S[54], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[72], fh_pairs[74]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[8], fh_pairs[10]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[22], fh_pairs[24]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[60], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[38], fh_pairs[40]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[62], pair);
+    }
+    lane_pair_store(&w->S[64], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[66], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[68], lane_pair_of(0, 0));
     w->S[70] = c_out;
-    w->S[71] = 0;
-    w->S[72] = 0;
+    lane_pair_store(&w->S[71], lane_pair_of(0, 0));
 }
 
 NED_DOPPLER13_REDUCED_BLOCK void horner_level_1_into_term(ned_doppler13_reduced_discretize_scratch
         *restrict w, const ned_doppler13_reduced_scalar c_out, const ned_doppler13_reduced_scalar
         c_in)
 {
+    const ned_doppler13_reduced_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     w->term[1][0] = c_out;
-    w->term[1][1] = w->fh[0]*c_in;
-    w->term[1][2] = w->fh[1]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[0], fh_pairs[2]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][1], pair);
+    }
     w->term[1][3] = 0;
-    w->term[1][4] = w->fh[2]*c_in;
-    w->term[1][5] = w->fh[3]*c_in;
-    w->term[1][6] = w->fh[6]*c_in;
-    w->term[1][7] = w->fh[7]*c_in;
-    w->term[1][8] = w->fh[8]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[4], fh_pairs[6]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[12], fh_pairs[14]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][6], pair);
+    }
+    w->term[1][8] = fh_pairs[16]*c_in;
     w->term[1][9] = c_out;
-    w->term[1][10] = w->fh[9]*c_in;
-    w->term[1][11] = w->fh[10]*c_in;
-    w->term[1][12] = 0;
-    w->term[1][13] = 0;
-    w->term[1][14] = w->fh[13]*c_in;
-    w->term[1][15] = w->fh[14]*c_in;
-    w->term[1][16] = w->fh[15]*c_in;
-    w->term[1][17] = w->fh[16]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[18], fh_pairs[20]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][10], pair);
+    }
+    lane_pair_store(&w->term[1][12], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[26], fh_pairs[28]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[30], fh_pairs[32]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][16], pair);
+    }
     w->term[1][18] = c_out;
     w->term[1][19] = 0;
-    w->term[1][20] = w->fh[17]*c_in;
-    w->term[1][21] = w->fh[18]*c_in;
-    w->term[1][22] = w->fh[21]*c_in;
-    w->term[1][23] = w->fh[22]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[34], fh_pairs[36]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][20], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[42], fh_pairs[44]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][22], pair);
+    }
     w->term[1][24] = 0;
-    w->term[1][25] = w->fh[23]*c_in;
-    w->term[1][26] = w->fh[24]*c_in;
-    w->term[1][27] = c_out + w->fh[25]*c_in;
-    w->term[1][28] = w->fh[26]*c_in;
-    w->term[1][29] = w->fh[27]*c_in;
-    w->term[1][30] = 0;
-    w->term[1][31] = 0;
-    w->term[1][32] = w->fh[28]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[46], fh_pairs[48]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][25], pair);
+    }
+    w->term[1][27] = c_out + fh_pairs[50]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[52], fh_pairs[54]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][28], pair);
+    }
+    lane_pair_store(&w->term[1][30], lane_pair_of(0, 0));
+    w->term[1][32] = fh_pairs[56]*c_in;
     w->term[1][33] = 0;
-    w->term[1][34] = w->fh[29]*c_in;
-    w->term[1][35] = w->fh[30]*c_in;
-    w->term[1][36] = c_out + w->fh[31]*c_in;
-    w->term[1][37] = w->fh[32]*c_in;
-    w->term[1][38] = 0;
-    w->term[1][39] = 0;
-    w->term[1][40] = 0;
-    w->term[1][41] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[58], fh_pairs[60]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][34], pair);
+    }
+    w->term[1][36] = c_out + fh_pairs[62]*c_in;
+    w->term[1][37] = fh_pairs[64]*c_in;
+    lane_pair_store(&w->term[1][38], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][40], lane_pair_of(0, 0));
     w->term[1][42] = 0;
-    w->term[1][43] = w->fh[33]*c_in;
+    w->term[1][43] = fh_pairs[66]*c_in;
     w->term[1][44] = 0;
     w->term[1][45] = c_out;
-    w->term[1][46] = 0;
-    w->term[1][47] = 0;
-    w->term[1][48] = 0;
-    w->term[1][49] = 0;
-    w->term[1][50] = 0;
-    w->term[1][51] = 0;
-    w->term[1][52] = w->fh[34]*c_in;
-    w->term[1][53] = w->fh[35]*c_in;
-    w->term[1][54] = 0;
-    w->term[1][55] = 0;
-    w->term[1][56] = c_out + w->fh[36]*c_in;
-    w->term[1][57] = c_out + w->fh[37]*c_in;
-    w->term[1][58] = w->fh[4]*c_in;
-    w->term[1][59] = w->fh[5]*c_in;
-    w->term[1][60] = w->fh[11]*c_in;
-    w->term[1][61] = w->fh[12]*c_in;
-    w->term[1][62] = w->fh[19]*c_in;
-    w->term[1][63] = w->fh[20]*c_in;
-    w->term[1][64] = 0;
-    w->term[1][65] = 0;
-    w->term[1][66] = 0;
-    w->term[1][67] = 0;
-    w->term[1][68] = 0;
-    w->term[1][69] = 0;
+    lane_pair_store(&w->term[1][46], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][48], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][50], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[68], fh_pairs[70]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][52], pair);
+    }
+    lane_pair_store(&w->term[1][54], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[72], fh_pairs[74]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[8], fh_pairs[10]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[22], fh_pairs[24]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][60], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[38], fh_pairs[40]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][62], pair);
+    }
+    lane_pair_store(&w->term[1][64], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][66], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][68], lane_pair_of(0, 0));
     w->term[1][70] = c_out;
-    w->term[1][71] = 0;
-    w->term[1][72] = 0;
+    lane_pair_store(&w->term[1][71], lane_pair_of(0, 0));
 }
 
 NED_DOPPLER13_REDUCED_BLOCK void horner_saturated_into_S(ned_doppler13_reduced_discretize_scratch
         *restrict w, const ned_doppler13_reduced_scalar c_out)
 {
+    const ned_doppler13_reduced_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 8; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][8+k] + w->fh[1]*w->term[1][16+k] + w->fh[2]*w->term[1][32+k] +
-                w->fh[3]*w->term[1][40+k];
-        w->S[8+k] = w->fh[8]*w->term[1][k] + w->fh[9]*w->term[1][16+k] + w->fh[10]*w->term[1][24+k];
-        w->S[16+k] = w->fh[15]*w->term[1][k] + w->fh[16]*w->term[1][8+k] +
-                w->fh[17]*w->term[1][32+k] + w->fh[18]*w->term[1][40+k];
-        w->S[24+k] = w->fh[23]*w->term[1][8+k] + w->fh[24]*w->term[1][16+k] +
-                w->fh[25]*w->term[1][24+k] + w->fh[26]*w->term[1][32+k] +
-                w->fh[27]*w->term[1][40+k];
-        w->S[32+k] = w->fh[28]*w->term[1][k] + w->fh[29]*w->term[1][16+k] +
-                w->fh[30]*w->term[1][24+k] + w->fh[31]*w->term[1][32+k] +
-                w->fh[32]*w->term[1][40+k];
-        w->S[40+k] = w->fh[33]*w->term[1][24+k];
+    for (k = 0; k < 8; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->term[1][8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->term[1][16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->term[1][32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->term[1][40+k]));
+        lane_pair_store(&w->S[k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[16]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[18]),
+                lane_pair_load(&w->term[1][16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->term[1][24+k]));
+        lane_pair_store(&w->S[8+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[30]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[32]),
+                lane_pair_load(&w->term[1][8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->term[1][32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->term[1][40+k]));
+        lane_pair_store(&w->S[16+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->term[1][8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->term[1][16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[52]),
+                lane_pair_load(&w->term[1][32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->term[1][40+k]));
+        lane_pair_store(&w->S[24+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->term[1][16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->term[1][32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->term[1][40+k]));
+        lane_pair_store(&w->S[32+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->term[1][24+k]));
+        lane_pair_store(&w->S[40+k], lanes);
     }
     w->S[0] = w->S[0] + c_out;
-    w->S[6] = w->S[6] + w->fh[6]*w->term[1][56];
-    w->S[7] = w->S[7] + w->fh[7]*w->term[1][57];
+    w->S[6] = w->S[6] + fh_pairs[12]*w->term[1][56];
+    w->S[7] = w->S[7] + fh_pairs[14]*w->term[1][57];
     w->S[9] = w->S[9] + c_out;
-    w->S[14] = w->S[14] + w->fh[13]*w->term[1][56];
-    w->S[15] = w->S[15] + w->fh[14]*w->term[1][57];
+    w->S[14] = w->S[14] + fh_pairs[26]*w->term[1][56];
+    w->S[15] = w->S[15] + fh_pairs[28]*w->term[1][57];
     w->S[18] = w->S[18] + c_out;
-    w->S[22] = w->S[22] + w->fh[21]*w->term[1][56];
-    w->S[23] = w->S[23] + w->fh[22]*w->term[1][57];
+    w->S[22] = w->S[22] + fh_pairs[42]*w->term[1][56];
+    w->S[23] = w->S[23] + fh_pairs[44]*w->term[1][57];
     w->S[27] = w->S[27] + c_out;
     w->S[36] = w->S[36] + c_out;
     w->S[45] = w->S[45] + c_out;
-    w->S[56] = c_out + w->fh[36]*w->term[1][56];
-    w->S[57] = c_out + w->fh[37]*w->term[1][57];
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[72], fh_pairs[74]),
+                lane_pair_load(&w->term[1][56]));
+        lane_pair_store(&w->S[56], pair);
+    }
 }
 
 NED_DOPPLER13_REDUCED_BLOCK void horner_saturated_into_term(ned_doppler13_reduced_discretize_scratch
         *restrict w, const ned_doppler13_reduced_scalar c_out)
 {
+    const ned_doppler13_reduced_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 8; ++k) {
-        w->term[1][k] = w->fh[0]*w->S[8+k] + w->fh[1]*w->S[16+k] + w->fh[2]*w->S[32+k] +
-                w->fh[3]*w->S[40+k];
-        w->term[1][8+k] = w->fh[8]*w->S[k] + w->fh[9]*w->S[16+k] + w->fh[10]*w->S[24+k];
-        w->term[1][16+k] = w->fh[15]*w->S[k] + w->fh[16]*w->S[8+k] + w->fh[17]*w->S[32+k] +
-                w->fh[18]*w->S[40+k];
-        w->term[1][24+k] = w->fh[23]*w->S[8+k] + w->fh[24]*w->S[16+k] + w->fh[25]*w->S[24+k] +
-                w->fh[26]*w->S[32+k] + w->fh[27]*w->S[40+k];
-        w->term[1][32+k] = w->fh[28]*w->S[k] + w->fh[29]*w->S[16+k] + w->fh[30]*w->S[24+k] +
-                w->fh[31]*w->S[32+k] + w->fh[32]*w->S[40+k];
-        w->term[1][40+k] = w->fh[33]*w->S[24+k];
+    for (k = 0; k < 8; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[40+k]));
+        lane_pair_store(&w->term[1][k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[16]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[18]),
+                lane_pair_load(&w->S[16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->S[24+k]));
+        lane_pair_store(&w->term[1][8+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[30]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[32]),
+                lane_pair_load(&w->S[8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->S[32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->S[40+k]));
+        lane_pair_store(&w->term[1][16+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->S[8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->S[16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[52]),
+                lane_pair_load(&w->S[32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->S[40+k]));
+        lane_pair_store(&w->term[1][24+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->S[16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[40+k]));
+        lane_pair_store(&w->term[1][32+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[24+k]));
+        lane_pair_store(&w->term[1][40+k], lanes);
     }
     w->term[1][0] = w->term[1][0] + c_out;
-    w->term[1][6] = w->term[1][6] + w->fh[6]*w->S[56];
-    w->term[1][7] = w->term[1][7] + w->fh[7]*w->S[57];
+    w->term[1][6] = w->term[1][6] + fh_pairs[12]*w->S[56];
+    w->term[1][7] = w->term[1][7] + fh_pairs[14]*w->S[57];
     w->term[1][9] = w->term[1][9] + c_out;
-    w->term[1][14] = w->term[1][14] + w->fh[13]*w->S[56];
-    w->term[1][15] = w->term[1][15] + w->fh[14]*w->S[57];
+    w->term[1][14] = w->term[1][14] + fh_pairs[26]*w->S[56];
+    w->term[1][15] = w->term[1][15] + fh_pairs[28]*w->S[57];
     w->term[1][18] = w->term[1][18] + c_out;
-    w->term[1][22] = w->term[1][22] + w->fh[21]*w->S[56];
-    w->term[1][23] = w->term[1][23] + w->fh[22]*w->S[57];
+    w->term[1][22] = w->term[1][22] + fh_pairs[42]*w->S[56];
+    w->term[1][23] = w->term[1][23] + fh_pairs[44]*w->S[57];
     w->term[1][27] = w->term[1][27] + c_out;
     w->term[1][36] = w->term[1][36] + c_out;
     w->term[1][45] = w->term[1][45] + c_out;
-    w->term[1][56] = c_out + w->fh[36]*w->S[56];
-    w->term[1][57] = c_out + w->fh[37]*w->S[57];
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[72], fh_pairs[74]),
+                lane_pair_load(&w->S[56]));
+        lane_pair_store(&w->term[1][56], pair);
+    }
 }
 
 NED_DOPPLER13_REDUCED_BLOCK void horner_first_into_term(ned_doppler13_reduced_discretize_scratch
         *restrict w, const ned_doppler13_reduced_scalar c_out)
 {
+    const ned_doppler13_reduced_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 8; ++k) {
-        w->term[1][k] = w->fh[0]*w->S[8+k] + w->fh[1]*w->S[16+k] + w->fh[2]*w->S[32+k] +
-                w->fh[3]*w->S[40+k];
-        w->term[1][8+k] = w->fh[8]*w->S[k] + w->fh[9]*w->S[16+k] + w->fh[10]*w->S[24+k];
-        w->term[1][16+k] = w->fh[15]*w->S[k] + w->fh[16]*w->S[8+k] + w->fh[17]*w->S[32+k] +
-                w->fh[18]*w->S[40+k];
-        w->term[1][24+k] = w->fh[23]*w->S[8+k] + w->fh[24]*w->S[16+k] + w->fh[25]*w->S[24+k] +
-                w->fh[26]*w->S[32+k] + w->fh[27]*w->S[40+k];
-        w->term[1][32+k] = w->fh[28]*w->S[k] + w->fh[29]*w->S[16+k] + w->fh[30]*w->S[24+k] +
-                w->fh[31]*w->S[32+k] + w->fh[32]*w->S[40+k];
-        w->term[1][40+k] = w->fh[33]*w->S[24+k];
-        w->term[1][48+k] = w->fh[34]*w->S[32+k] + w->fh[35]*w->S[40+k];
+    for (k = 0; k < 8; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[40+k]));
+        lane_pair_store(&w->term[1][k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[16]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[18]),
+                lane_pair_load(&w->S[16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->S[24+k]));
+        lane_pair_store(&w->term[1][8+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[30]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[32]),
+                lane_pair_load(&w->S[8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->S[32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->S[40+k]));
+        lane_pair_store(&w->term[1][16+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->S[8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->S[16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[52]),
+                lane_pair_load(&w->S[32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->S[40+k]));
+        lane_pair_store(&w->term[1][24+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->S[16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[40+k]));
+        lane_pair_store(&w->term[1][32+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[24+k]));
+        lane_pair_store(&w->term[1][40+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[68]),
+                lane_pair_load(&w->S[32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->S[40+k]));
+        lane_pair_store(&w->term[1][48+k], lanes);
     }
     w->term[1][0] = w->term[1][0] + c_out;
-    w->term[1][6] = w->term[1][6] + w->fh[6]*w->S[56];
-    w->term[1][7] = w->term[1][7] + w->fh[7]*w->S[57];
+    w->term[1][6] = w->term[1][6] + fh_pairs[12]*w->S[56];
+    w->term[1][7] = w->term[1][7] + fh_pairs[14]*w->S[57];
     w->term[1][9] = w->term[1][9] + c_out;
-    w->term[1][14] = w->term[1][14] + w->fh[13]*w->S[56];
-    w->term[1][15] = w->term[1][15] + w->fh[14]*w->S[57];
+    w->term[1][14] = w->term[1][14] + fh_pairs[26]*w->S[56];
+    w->term[1][15] = w->term[1][15] + fh_pairs[28]*w->S[57];
     w->term[1][18] = w->term[1][18] + c_out;
-    w->term[1][22] = w->term[1][22] + w->fh[21]*w->S[56];
-    w->term[1][23] = w->term[1][23] + w->fh[22]*w->S[57];
+    w->term[1][22] = w->term[1][22] + fh_pairs[42]*w->S[56];
+    w->term[1][23] = w->term[1][23] + fh_pairs[44]*w->S[57];
     w->term[1][27] = w->term[1][27] + c_out;
     w->term[1][36] = w->term[1][36] + c_out;
     w->term[1][45] = w->term[1][45] + c_out;
     w->term[1][70] = c_out;
-    w->term[1][56] = c_out + w->fh[36]*w->S[56];
-    w->term[1][57] = c_out + w->fh[37]*w->S[57];
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[72], fh_pairs[74]),
+                lane_pair_load(&w->S[56]));
+        lane_pair_store(&w->term[1][56], pair);
+    }
 }
 
 NED_DOPPLER13_REDUCED_BLOCK void horner_last_into_S(ned_doppler13_reduced_discretize_scratch
         *restrict w, const ned_doppler13_reduced_scalar c_out)
 {
+    const ned_doppler13_reduced_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 8; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][8+k] + w->fh[1]*w->term[1][16+k] + w->fh[2]*w->term[1][32+k] +
-                w->fh[3]*w->term[1][40+k];
-        w->S[8+k] = w->fh[8]*w->term[1][k] + w->fh[9]*w->term[1][16+k] + w->fh[10]*w->term[1][24+k];
-        w->S[16+k] = w->fh[15]*w->term[1][k] + w->fh[16]*w->term[1][8+k] +
-                w->fh[17]*w->term[1][32+k] + w->fh[18]*w->term[1][40+k];
-        w->S[24+k] = w->fh[23]*w->term[1][8+k] + w->fh[24]*w->term[1][16+k] +
-                w->fh[25]*w->term[1][24+k] + w->fh[26]*w->term[1][32+k] +
-                w->fh[27]*w->term[1][40+k];
-        w->S[32+k] = w->fh[28]*w->term[1][k] + w->fh[29]*w->term[1][16+k] +
-                w->fh[30]*w->term[1][24+k] + w->fh[31]*w->term[1][32+k] +
-                w->fh[32]*w->term[1][40+k];
-        w->S[40+k] = w->fh[33]*w->term[1][24+k];
-        w->S[48+k] = w->fh[34]*w->term[1][32+k] + w->fh[35]*w->term[1][40+k];
+    for (k = 0; k < 8; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->term[1][8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->term[1][16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->term[1][32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->term[1][40+k]));
+        lane_pair_store(&w->S[k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[16]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[18]),
+                lane_pair_load(&w->term[1][16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->term[1][24+k]));
+        lane_pair_store(&w->S[8+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[30]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[32]),
+                lane_pair_load(&w->term[1][8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->term[1][32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->term[1][40+k]));
+        lane_pair_store(&w->S[16+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[46]),
+                lane_pair_load(&w->term[1][8+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->term[1][16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[52]),
+                lane_pair_load(&w->term[1][32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->term[1][40+k]));
+        lane_pair_store(&w->S[24+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->term[1][16+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->term[1][32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->term[1][40+k]));
+        lane_pair_store(&w->S[32+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->term[1][24+k]));
+        lane_pair_store(&w->S[40+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[68]),
+                lane_pair_load(&w->term[1][32+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->term[1][40+k]));
+        lane_pair_store(&w->S[48+k], lanes);
     }
     w->S[0] = w->S[0] + c_out;
-    w->S[6] = w->S[6] + w->fh[6]*w->term[1][56];
-    w->S[7] = w->S[7] + w->fh[7]*w->term[1][57];
+    w->S[6] = w->S[6] + fh_pairs[12]*w->term[1][56];
+    w->S[7] = w->S[7] + fh_pairs[14]*w->term[1][57];
     w->S[9] = w->S[9] + c_out;
-    w->S[14] = w->S[14] + w->fh[13]*w->term[1][56];
-    w->S[15] = w->S[15] + w->fh[14]*w->term[1][57];
+    w->S[14] = w->S[14] + fh_pairs[26]*w->term[1][56];
+    w->S[15] = w->S[15] + fh_pairs[28]*w->term[1][57];
     w->S[18] = w->S[18] + c_out;
-    w->S[22] = w->S[22] + w->fh[21]*w->term[1][56];
-    w->S[23] = w->S[23] + w->fh[22]*w->term[1][57];
+    w->S[22] = w->S[22] + fh_pairs[42]*w->term[1][56];
+    w->S[23] = w->S[23] + fh_pairs[44]*w->term[1][57];
     w->S[27] = w->S[27] + c_out;
     w->S[36] = w->S[36] + c_out;
     w->S[45] = w->S[45] + c_out;
     w->S[70] = c_out;
-    w->S[56] = c_out + w->fh[36]*w->term[1][56];
-    w->S[57] = c_out + w->fh[37]*w->term[1][57];
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[72], fh_pairs[74]),
+                lane_pair_load(&w->term[1][56]));
+        lane_pair_store(&w->S[56], pair);
+    }
 }
 
 NED_DOPPLER13_REDUCED_BLOCK void horner_unit_columns(ned_doppler13_reduced_discretize_scratch
         *restrict w)
 {
+    const ned_doppler13_reduced_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
-                lane_pair_load(&w->fh[11]));
+                lane_pair_of(fh_pairs[22], fh_pairs[24]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
-                lane_pair_load(&w->fh[19]));
+                lane_pair_of(fh_pairs[38], fh_pairs[40]));
         lane_pair_store(&w->S[58], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][8], w->term[1][8]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][9], w->term[1][9]),
-                lane_pair_load(&w->fh[11]));
+                lane_pair_of(fh_pairs[22], fh_pairs[24]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][10], w->term[1][10]),
-                lane_pair_load(&w->fh[19]));
+                lane_pair_of(fh_pairs[38], fh_pairs[40]));
         lane_pair_store(&w->S[60], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][16], w->term[1][16]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][17], w->term[1][17]),
-                lane_pair_load(&w->fh[11]));
+                lane_pair_of(fh_pairs[22], fh_pairs[24]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][18], w->term[1][18]),
-                lane_pair_load(&w->fh[19]));
+                lane_pair_of(fh_pairs[38], fh_pairs[40]));
         lane_pair_store(&w->S[62], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
-                lane_pair_load(&w->fh[11]));
+                lane_pair_of(fh_pairs[22], fh_pairs[24]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
-                lane_pair_load(&w->fh[19]));
+                lane_pair_of(fh_pairs[38], fh_pairs[40]));
         lane_pair_store(&w->S[64], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][32], w->term[1][32]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][33], w->term[1][33]),
-                lane_pair_load(&w->fh[11]));
+                lane_pair_of(fh_pairs[22], fh_pairs[24]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][34], w->term[1][34]),
-                lane_pair_load(&w->fh[19]));
+                lane_pair_of(fh_pairs[38], fh_pairs[40]));
         lane_pair_store(&w->S[66], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][40], w->term[1][40]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][41], w->term[1][41]),
-                lane_pair_load(&w->fh[11]));
+                lane_pair_of(fh_pairs[22], fh_pairs[24]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][42], w->term[1][42]),
-                lane_pair_load(&w->fh[19]));
+                lane_pair_of(fh_pairs[38], fh_pairs[40]));
         lane_pair_store(&w->S[68], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
-                lane_pair_load(&w->fh[11]));
+                lane_pair_of(fh_pairs[22], fh_pairs[24]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
-                lane_pair_load(&w->fh[19]));
+                lane_pair_of(fh_pairs[38], fh_pairs[40]));
         lane_pair_store(&w->S[71], pair);
     }
 }
@@ -1061,133 +1344,366 @@ NED_DOPPLER13_REDUCED_BLOCK void horner_transition(ned_doppler13_reduced_transit
         const ned_doppler13_reduced_discretize_scratch *restrict w)
 {
     const ned_doppler13_reduced_scalar one = 1.0;
-    int k;
-    for (k = 0; k < 6; ++k) {
-        t->Phi[k] = w->fh[0]*w->S[8+k] + w->fh[1]*w->S[16+k] + w->fh[2]*w->S[32+k] +
-                w->fh[3]*w->S[40+k];
-    }
-    for (k = 0; k < 2; ++k) {
-        t->Phi[8+k] = w->fh[0]*w->S[14+k] + w->fh[1]*w->S[22+k] + w->fh[2]*w->S[38+k] +
-                w->fh[3]*w->S[46+k];
-    }
-    for (k = 0; k < 6; ++k) {
-        t->Phi[10+k] = w->fh[8]*w->S[k] + w->fh[9]*w->S[16+k] + w->fh[10]*w->S[24+k];
-    }
-    for (k = 0; k < 2; ++k) {
-        t->Phi[18+k] = w->fh[8]*w->S[6+k] + w->fh[9]*w->S[22+k] + w->fh[10]*w->S[30+k];
-    }
-    for (k = 0; k < 6; ++k) {
-        t->Phi[20+k] = w->fh[15]*w->S[k] + w->fh[16]*w->S[8+k] + w->fh[17]*w->S[32+k] +
-                w->fh[18]*w->S[40+k];
-    }
-    for (k = 0; k < 2; ++k) {
-        t->Phi[28+k] = w->fh[15]*w->S[6+k] + w->fh[16]*w->S[14+k] + w->fh[17]*w->S[38+k] +
-                w->fh[18]*w->S[46+k];
-    }
-    for (k = 0; k < 6; ++k) {
-        t->Phi[30+k] = w->fh[23]*w->S[8+k] + w->fh[24]*w->S[16+k] + w->fh[25]*w->S[24+k] +
-                w->fh[26]*w->S[32+k] + w->fh[27]*w->S[40+k];
-    }
-    for (k = 0; k < 2; ++k) {
-        t->Phi[38+k] = w->fh[23]*w->S[14+k] + w->fh[24]*w->S[22+k] + w->fh[25]*w->S[30+k] +
-                w->fh[26]*w->S[38+k] + w->fh[27]*w->S[46+k];
-    }
-    for (k = 0; k < 6; ++k) {
-        t->Phi[40+k] = w->fh[28]*w->S[k] + w->fh[29]*w->S[16+k] + w->fh[30]*w->S[24+k] +
-                w->fh[31]*w->S[32+k] + w->fh[32]*w->S[40+k];
-    }
-    for (k = 0; k < 2; ++k) {
-        t->Phi[48+k] = w->fh[28]*w->S[6+k] + w->fh[29]*w->S[22+k] + w->fh[30]*w->S[30+k] +
-                w->fh[31]*w->S[38+k] + w->fh[32]*w->S[46+k];
-    }
-    for (k = 0; k < 6; ++k) {
-        t->Phi[50+k] = w->fh[33]*w->S[24+k];
-    }
-    for (k = 0; k < 2; ++k) {
-        t->Phi[58+k] = w->fh[33]*w->S[30+k];
-    }
-    for (k = 0; k < 6; ++k) {
-        t->Phi[60+k] = w->fh[34]*w->S[32+k] + w->fh[35]*w->S[40+k];
-    }
-    for (k = 0; k < 2; ++k) {
-        t->Phi[69+k] = w->fh[34]*w->S[38+k] + w->fh[35]*w->S[46+k];
-    }
-    t->Phi[8] = t->Phi[8] + w->fh[6]*w->S[56];
-    t->Phi[9] = t->Phi[9] + w->fh[7]*w->S[57];
-    t->Phi[18] = t->Phi[18] + w->fh[13]*w->S[56];
-    t->Phi[19] = t->Phi[19] + w->fh[14]*w->S[57];
-    t->Phi[28] = t->Phi[28] + w->fh[21]*w->S[56];
-    t->Phi[29] = t->Phi[29] + w->fh[22]*w->S[57];
-    t->Phi[73] = w->fh[36]*w->S[56];
-    t->Phi[74] = w->fh[37]*w->S[57];
+    const ned_doppler13_reduced_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     {
-        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
-                lane_pair_load(&w->fh[4]));
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[8]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[16]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[40]));
+        lane_pair_store(&t->Phi[0], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[18]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[34]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[42]));
+        lane_pair_store(&t->Phi[2], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[12]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[20]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[36]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[44]));
+        lane_pair_store(&t->Phi[4], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[14]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[46]));
+        lane_pair_store(&t->Phi[8], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[16]), lane_pair_load(&w->S[0]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[18]),
+                lane_pair_load(&w->S[16]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->S[24]));
+        lane_pair_store(&t->Phi[10], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[16]), lane_pair_load(&w->S[2]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[18]),
+                lane_pair_load(&w->S[18]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->S[26]));
+        lane_pair_store(&t->Phi[12], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[16]), lane_pair_load(&w->S[4]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[18]),
+                lane_pair_load(&w->S[20]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->S[28]));
+        lane_pair_store(&t->Phi[14], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[16]), lane_pair_load(&w->S[6]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[18]),
+                lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->S[30]));
+        lane_pair_store(&t->Phi[18], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[30]), lane_pair_load(&w->S[0]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[32]),
+                lane_pair_load(&w->S[8]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->S[40]));
+        lane_pair_store(&t->Phi[20], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[30]), lane_pair_load(&w->S[2]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[32]),
+                lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->S[34]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->S[42]));
+        lane_pair_store(&t->Phi[22], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[30]), lane_pair_load(&w->S[4]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[32]),
+                lane_pair_load(&w->S[12]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->S[36]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->S[44]));
+        lane_pair_store(&t->Phi[24], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[30]), lane_pair_load(&w->S[6]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[32]),
+                lane_pair_load(&w->S[14]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[34]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[36]),
+                lane_pair_load(&w->S[46]));
+        lane_pair_store(&t->Phi[28], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[46]), lane_pair_load(&w->S[8]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->S[16]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[24]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[52]),
+                lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->S[40]));
+        lane_pair_store(&t->Phi[30], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[46]), lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->S[18]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[52]),
+                lane_pair_load(&w->S[34]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->S[42]));
+        lane_pair_store(&t->Phi[32], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[46]), lane_pair_load(&w->S[12]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->S[20]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[28]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[52]),
+                lane_pair_load(&w->S[36]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->S[44]));
+        lane_pair_store(&t->Phi[34], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[46]), lane_pair_load(&w->S[14]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[48]),
+                lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[50]),
+                lane_pair_load(&w->S[30]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[52]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[54]),
+                lane_pair_load(&w->S[46]));
+        lane_pair_store(&t->Phi[38], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]), lane_pair_load(&w->S[0]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->S[16]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[24]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[40]));
+        lane_pair_store(&t->Phi[40], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]), lane_pair_load(&w->S[2]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->S[18]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[34]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[42]));
+        lane_pair_store(&t->Phi[42], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]), lane_pair_load(&w->S[4]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->S[20]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[28]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[36]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[44]));
+        lane_pair_store(&t->Phi[44], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[56]), lane_pair_load(&w->S[6]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[30]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[46]));
+        lane_pair_store(&t->Phi[48], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[66]), lane_pair_load(&w->S[24]));
+        lane_pair_store(&t->Phi[50], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[66]), lane_pair_load(&w->S[26]));
+        lane_pair_store(&t->Phi[52], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[66]), lane_pair_load(&w->S[28]));
+        lane_pair_store(&t->Phi[54], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[66]), lane_pair_load(&w->S[30]));
+        lane_pair_store(&t->Phi[58], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[68]), lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->S[40]));
+        lane_pair_store(&t->Phi[60], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[68]), lane_pair_load(&w->S[34]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->S[42]));
+        lane_pair_store(&t->Phi[62], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[68]), lane_pair_load(&w->S[36]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->S[44]));
+        lane_pair_store(&t->Phi[64], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[68]), lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[70]),
+                lane_pair_load(&w->S[46]));
+        lane_pair_store(&t->Phi[69], lanes);
+    }
+    t->Phi[8] = t->Phi[8] + fh_pairs[12]*w->S[56];
+    t->Phi[9] = t->Phi[9] + fh_pairs[14]*w->S[57];
+    t->Phi[18] = t->Phi[18] + fh_pairs[26]*w->S[56];
+    t->Phi[19] = t->Phi[19] + fh_pairs[28]*w->S[57];
+    t->Phi[28] = t->Phi[28] + fh_pairs[42]*w->S[56];
+    t->Phi[29] = t->Phi[29] + fh_pairs[44]*w->S[57];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[72], fh_pairs[74]),
+                lane_pair_load(&w->S[56]));
+        lane_pair_store(&t->Phi[73], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]), lane_pair_of(fh_pairs[8],
+                fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
-                lane_pair_load(&w->fh[11]));
+                lane_pair_of(fh_pairs[22], fh_pairs[24]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
-                lane_pair_load(&w->fh[19]));
+                lane_pair_of(fh_pairs[38], fh_pairs[40]));
         lane_pair_store(&t->Phi[6], pair);
     }
     {
-        lane_pair pair = lane_pair_product(lane_pair_of(w->S[8], w->S[8]),
-                lane_pair_load(&w->fh[4]));
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[8], w->S[8]), lane_pair_of(fh_pairs[8],
+                fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[9], w->S[9]),
-                lane_pair_load(&w->fh[11]));
+                lane_pair_of(fh_pairs[22], fh_pairs[24]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[10], w->S[10]),
-                lane_pair_load(&w->fh[19]));
+                lane_pair_of(fh_pairs[38], fh_pairs[40]));
         lane_pair_store(&t->Phi[16], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[16], w->S[16]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[17], w->S[17]),
-                lane_pair_load(&w->fh[11]));
+                lane_pair_of(fh_pairs[22], fh_pairs[24]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[18], w->S[18]),
-                lane_pair_load(&w->fh[19]));
+                lane_pair_of(fh_pairs[38], fh_pairs[40]));
         lane_pair_store(&t->Phi[26], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
-                lane_pair_load(&w->fh[11]));
+                lane_pair_of(fh_pairs[22], fh_pairs[24]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
-                lane_pair_load(&w->fh[19]));
+                lane_pair_of(fh_pairs[38], fh_pairs[40]));
         lane_pair_store(&t->Phi[36], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[32], w->S[32]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[33], w->S[33]),
-                lane_pair_load(&w->fh[11]));
+                lane_pair_of(fh_pairs[22], fh_pairs[24]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[34], w->S[34]),
-                lane_pair_load(&w->fh[19]));
+                lane_pair_of(fh_pairs[38], fh_pairs[40]));
         lane_pair_store(&t->Phi[46], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[40], w->S[40]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[41], w->S[41]),
-                lane_pair_load(&w->fh[11]));
+                lane_pair_of(fh_pairs[22], fh_pairs[24]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[42], w->S[42]),
-                lane_pair_load(&w->fh[19]));
+                lane_pair_of(fh_pairs[38], fh_pairs[40]));
         lane_pair_store(&t->Phi[56], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
-                lane_pair_load(&w->fh[11]));
+                lane_pair_of(fh_pairs[22], fh_pairs[24]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
-                lane_pair_load(&w->fh[19]));
+                lane_pair_of(fh_pairs[38], fh_pairs[40]));
         lane_pair_store(&t->Phi[67], pair);
     }
     t->Phi[66] = 0;
-    t->Phi[71] = one;
-    t->Phi[72] = one;
-    t->Phi[75] = one;
-    t->Phi[76] = one;
+    {
+        lane_pair pair = lane_pair_of(one, one);
+        lane_pair_store(&t->Phi[71], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(one, one);
+        lane_pair_store(&t->Phi[75], pair);
+    }
 }
 
 NED_DOPPLER13_REDUCED_BLOCK void doubling(ned_doppler13_reduced_transition *restrict t,
@@ -1279,8 +1795,11 @@ NED_DOPPLER13_REDUCED_BLOCK void doubling(ned_doppler13_reduced_transition *rest
                 t->Phi[62]*t->Phi[28+k] + t->Phi[63]*t->Phi[38+k] + t->Phi[64]*t->Phi[48+k] +
                 t->Phi[65]*t->Phi[58+k] + t->Phi[66]*t->Phi[69+k];
     }
-    w->term[0][71] = t->Phi[73]*t->Phi[73];
-    w->term[0][72] = t->Phi[74]*t->Phi[74];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[73]),
+                lane_pair_load(&t->Phi[73]));
+        lane_pair_store(&w->term[0][71], pair);
+    }
     for (k = 0; k < 6; ++k) {
         w->term[1][k] = t->Phi[0]*w->S[k] + t->Phi[1]*w->S[8+k] + t->Phi[2]*w->S[16+k] +
                 t->Phi[3]*w->S[24+k] + t->Phi[4]*w->S[32+k] + t->Phi[5]*w->S[40+k];
@@ -1355,196 +1874,555 @@ NED_DOPPLER13_REDUCED_BLOCK void doubling(ned_doppler13_reduced_transition *rest
                 t->Phi[63]*w->S[30+k] + t->Phi[64]*w->S[38+k] + t->Phi[65]*w->S[46+k] +
                 t->Phi[66]*w->S[54+k];
     }
-    w->term[1][71] = t->Phi[73]*w->S[56];
-    w->term[1][72] = t->Phi[74]*w->S[57];
-    w->term[0][8] = w->term[0][8] + t->Phi[8]*t->Phi[73];
-    w->term[0][9] = w->term[0][9] + t->Phi[9]*t->Phi[74];
-    w->term[0][18] = w->term[0][18] + t->Phi[18]*t->Phi[73];
-    w->term[0][19] = w->term[0][19] + t->Phi[19]*t->Phi[74];
-    w->term[0][28] = w->term[0][28] + t->Phi[28]*t->Phi[73];
-    w->term[0][29] = w->term[0][29] + t->Phi[29]*t->Phi[74];
-    w->term[0][38] = w->term[0][38] + t->Phi[38]*t->Phi[73];
-    w->term[0][39] = w->term[0][39] + t->Phi[39]*t->Phi[74];
-    w->term[0][48] = w->term[0][48] + t->Phi[48]*t->Phi[73];
-    w->term[0][49] = w->term[0][49] + t->Phi[49]*t->Phi[74];
-    w->term[0][58] = w->term[0][58] + t->Phi[58]*t->Phi[73];
-    w->term[0][59] = w->term[0][59] + t->Phi[59]*t->Phi[74];
-    w->term[0][69] = w->term[0][69] + t->Phi[69]*t->Phi[73];
-    w->term[0][70] = w->term[0][70] + t->Phi[70]*t->Phi[74];
-    w->term[1][6] = w->term[1][6] + t->Phi[6];
-    w->term[1][7] = w->term[1][7] + t->Phi[7];
-    w->term[1][8] = w->term[1][8] + t->Phi[8]*w->S[56];
-    w->term[1][9] = w->term[1][9] + t->Phi[9]*w->S[57];
-    w->term[1][16] = w->term[1][16] + t->Phi[16];
-    w->term[1][17] = w->term[1][17] + t->Phi[17];
-    w->term[1][18] = w->term[1][18] + t->Phi[18]*w->S[56];
-    w->term[1][19] = w->term[1][19] + t->Phi[19]*w->S[57];
-    w->term[1][26] = w->term[1][26] + t->Phi[26];
-    w->term[1][27] = w->term[1][27] + t->Phi[27];
-    w->term[1][28] = w->term[1][28] + t->Phi[28]*w->S[56];
-    w->term[1][29] = w->term[1][29] + t->Phi[29]*w->S[57];
-    w->term[1][36] = w->term[1][36] + t->Phi[36];
-    w->term[1][37] = w->term[1][37] + t->Phi[37];
-    w->term[1][38] = w->term[1][38] + t->Phi[38]*w->S[56];
-    w->term[1][39] = w->term[1][39] + t->Phi[39]*w->S[57];
-    w->term[1][46] = w->term[1][46] + t->Phi[46];
-    w->term[1][47] = w->term[1][47] + t->Phi[47];
-    w->term[1][48] = w->term[1][48] + t->Phi[48]*w->S[56];
-    w->term[1][49] = w->term[1][49] + t->Phi[49]*w->S[57];
-    w->term[1][56] = w->term[1][56] + t->Phi[56];
-    w->term[1][57] = w->term[1][57] + t->Phi[57];
-    w->term[1][58] = w->term[1][58] + t->Phi[58]*w->S[56];
-    w->term[1][59] = w->term[1][59] + t->Phi[59]*w->S[57];
-    w->term[1][67] = w->term[1][67] + t->Phi[67];
-    w->term[1][68] = w->term[1][68] + t->Phi[68];
-    w->term[1][69] = w->term[1][69] + t->Phi[69]*w->S[56];
-    w->term[1][70] = w->term[1][70] + t->Phi[70]*w->S[57];
-    t->Phi[0] = t->Phi[0] + t->Phi[0] + w->term[0][0];
-    t->Phi[1] = t->Phi[1] + t->Phi[1] + w->term[0][1];
-    t->Phi[2] = t->Phi[2] + t->Phi[2] + w->term[0][2];
-    t->Phi[3] = t->Phi[3] + t->Phi[3] + w->term[0][3];
-    t->Phi[4] = t->Phi[4] + t->Phi[4] + w->term[0][4];
-    t->Phi[5] = t->Phi[5] + t->Phi[5] + w->term[0][5];
-    t->Phi[6] = t->Phi[6] + t->Phi[6] + w->term[0][6];
-    t->Phi[7] = t->Phi[7] + t->Phi[7] + w->term[0][7];
-    t->Phi[8] = t->Phi[8] + t->Phi[8] + w->term[0][8];
-    t->Phi[9] = t->Phi[9] + t->Phi[9] + w->term[0][9];
-    t->Phi[10] = t->Phi[10] + t->Phi[10] + w->term[0][10];
-    t->Phi[11] = t->Phi[11] + t->Phi[11] + w->term[0][11];
-    t->Phi[12] = t->Phi[12] + t->Phi[12] + w->term[0][12];
-    t->Phi[13] = t->Phi[13] + t->Phi[13] + w->term[0][13];
-    t->Phi[14] = t->Phi[14] + t->Phi[14] + w->term[0][14];
-    t->Phi[15] = t->Phi[15] + t->Phi[15] + w->term[0][15];
-    t->Phi[16] = t->Phi[16] + t->Phi[16] + w->term[0][16];
-    t->Phi[17] = t->Phi[17] + t->Phi[17] + w->term[0][17];
-    t->Phi[18] = t->Phi[18] + t->Phi[18] + w->term[0][18];
-    t->Phi[19] = t->Phi[19] + t->Phi[19] + w->term[0][19];
-    t->Phi[20] = t->Phi[20] + t->Phi[20] + w->term[0][20];
-    t->Phi[21] = t->Phi[21] + t->Phi[21] + w->term[0][21];
-    t->Phi[22] = t->Phi[22] + t->Phi[22] + w->term[0][22];
-    t->Phi[23] = t->Phi[23] + t->Phi[23] + w->term[0][23];
-    t->Phi[24] = t->Phi[24] + t->Phi[24] + w->term[0][24];
-    t->Phi[25] = t->Phi[25] + t->Phi[25] + w->term[0][25];
-    t->Phi[26] = t->Phi[26] + t->Phi[26] + w->term[0][26];
-    t->Phi[27] = t->Phi[27] + t->Phi[27] + w->term[0][27];
-    t->Phi[28] = t->Phi[28] + t->Phi[28] + w->term[0][28];
-    t->Phi[29] = t->Phi[29] + t->Phi[29] + w->term[0][29];
-    t->Phi[30] = t->Phi[30] + t->Phi[30] + w->term[0][30];
-    t->Phi[31] = t->Phi[31] + t->Phi[31] + w->term[0][31];
-    t->Phi[32] = t->Phi[32] + t->Phi[32] + w->term[0][32];
-    t->Phi[33] = t->Phi[33] + t->Phi[33] + w->term[0][33];
-    t->Phi[34] = t->Phi[34] + t->Phi[34] + w->term[0][34];
-    t->Phi[35] = t->Phi[35] + t->Phi[35] + w->term[0][35];
-    t->Phi[36] = t->Phi[36] + t->Phi[36] + w->term[0][36];
-    t->Phi[37] = t->Phi[37] + t->Phi[37] + w->term[0][37];
-    t->Phi[38] = t->Phi[38] + t->Phi[38] + w->term[0][38];
-    t->Phi[39] = t->Phi[39] + t->Phi[39] + w->term[0][39];
-    t->Phi[40] = t->Phi[40] + t->Phi[40] + w->term[0][40];
-    t->Phi[41] = t->Phi[41] + t->Phi[41] + w->term[0][41];
-    t->Phi[42] = t->Phi[42] + t->Phi[42] + w->term[0][42];
-    t->Phi[43] = t->Phi[43] + t->Phi[43] + w->term[0][43];
-    t->Phi[44] = t->Phi[44] + t->Phi[44] + w->term[0][44];
-    t->Phi[45] = t->Phi[45] + t->Phi[45] + w->term[0][45];
-    t->Phi[46] = t->Phi[46] + t->Phi[46] + w->term[0][46];
-    t->Phi[47] = t->Phi[47] + t->Phi[47] + w->term[0][47];
-    t->Phi[48] = t->Phi[48] + t->Phi[48] + w->term[0][48];
-    t->Phi[49] = t->Phi[49] + t->Phi[49] + w->term[0][49];
-    t->Phi[50] = t->Phi[50] + t->Phi[50] + w->term[0][50];
-    t->Phi[51] = t->Phi[51] + t->Phi[51] + w->term[0][51];
-    t->Phi[52] = t->Phi[52] + t->Phi[52] + w->term[0][52];
-    t->Phi[53] = t->Phi[53] + t->Phi[53] + w->term[0][53];
-    t->Phi[54] = t->Phi[54] + t->Phi[54] + w->term[0][54];
-    t->Phi[55] = t->Phi[55] + t->Phi[55] + w->term[0][55];
-    t->Phi[56] = t->Phi[56] + t->Phi[56] + w->term[0][56];
-    t->Phi[57] = t->Phi[57] + t->Phi[57] + w->term[0][57];
-    t->Phi[58] = t->Phi[58] + t->Phi[58] + w->term[0][58];
-    t->Phi[59] = t->Phi[59] + t->Phi[59] + w->term[0][59];
-    t->Phi[60] = t->Phi[60] + t->Phi[60] + w->term[0][60];
-    t->Phi[61] = t->Phi[61] + t->Phi[61] + w->term[0][61];
-    t->Phi[62] = t->Phi[62] + t->Phi[62] + w->term[0][62];
-    t->Phi[63] = t->Phi[63] + t->Phi[63] + w->term[0][63];
-    t->Phi[64] = t->Phi[64] + t->Phi[64] + w->term[0][64];
-    t->Phi[65] = t->Phi[65] + t->Phi[65] + w->term[0][65];
-    t->Phi[66] = t->Phi[66] + t->Phi[66] + w->term[0][66];
-    t->Phi[67] = t->Phi[67] + t->Phi[67] + w->term[0][67];
-    t->Phi[68] = t->Phi[68] + t->Phi[68] + w->term[0][68];
-    t->Phi[69] = t->Phi[69] + t->Phi[69] + w->term[0][69];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[73]), lane_pair_load(&w->S[56]));
+        lane_pair_store(&w->term[1][71], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][8]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[8]), lane_pair_load(&t->Phi[73]));
+        lane_pair_store(&w->term[0][8], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][18]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[18]),
+                lane_pair_load(&t->Phi[73]));
+        lane_pair_store(&w->term[0][18], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][28]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[28]),
+                lane_pair_load(&t->Phi[73]));
+        lane_pair_store(&w->term[0][28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][38]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[38]),
+                lane_pair_load(&t->Phi[73]));
+        lane_pair_store(&w->term[0][38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][48]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[48]),
+                lane_pair_load(&t->Phi[73]));
+        lane_pair_store(&w->term[0][48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][58]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[58]),
+                lane_pair_load(&t->Phi[73]));
+        lane_pair_store(&w->term[0][58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][69]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[69]),
+                lane_pair_load(&t->Phi[73]));
+        lane_pair_store(&w->term[0][69], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][6]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[6]));
+        lane_pair_store(&w->term[1][6], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][8]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[8]), lane_pair_load(&w->S[56]));
+        lane_pair_store(&w->term[1][8], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][16]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[16]));
+        lane_pair_store(&w->term[1][16], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][18]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[18]), lane_pair_load(&w->S[56]));
+        lane_pair_store(&w->term[1][18], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][26]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[26]));
+        lane_pair_store(&w->term[1][26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][28]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[28]), lane_pair_load(&w->S[56]));
+        lane_pair_store(&w->term[1][28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][36]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[36]));
+        lane_pair_store(&w->term[1][36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][38]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[38]), lane_pair_load(&w->S[56]));
+        lane_pair_store(&w->term[1][38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][46]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[46]));
+        lane_pair_store(&w->term[1][46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][48]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[48]), lane_pair_load(&w->S[56]));
+        lane_pair_store(&w->term[1][48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][56]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[56]));
+        lane_pair_store(&w->term[1][56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][58]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[58]), lane_pair_load(&w->S[56]));
+        lane_pair_store(&w->term[1][58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][67]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[67]));
+        lane_pair_store(&w->term[1][67], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][69]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[69]), lane_pair_load(&w->S[56]));
+        lane_pair_store(&w->term[1][69], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[0]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[0]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][0]));
+        lane_pair_store(&t->Phi[0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[2]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[2]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][2]));
+        lane_pair_store(&t->Phi[2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[4]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[4]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][4]));
+        lane_pair_store(&t->Phi[4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[6]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[6]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][6]));
+        lane_pair_store(&t->Phi[6], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[8]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[8]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][8]));
+        lane_pair_store(&t->Phi[8], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[10]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[10]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][10]));
+        lane_pair_store(&t->Phi[10], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[12]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[12]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][12]));
+        lane_pair_store(&t->Phi[12], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[14]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[14]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][14]));
+        lane_pair_store(&t->Phi[14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[16]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[16]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][16]));
+        lane_pair_store(&t->Phi[16], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[18]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[18]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][18]));
+        lane_pair_store(&t->Phi[18], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[20]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[20]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][20]));
+        lane_pair_store(&t->Phi[20], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[22]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[22]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][22]));
+        lane_pair_store(&t->Phi[22], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[24]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[24]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][24]));
+        lane_pair_store(&t->Phi[24], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[26]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[26]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][26]));
+        lane_pair_store(&t->Phi[26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[28]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[28]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][28]));
+        lane_pair_store(&t->Phi[28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[30]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[30]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][30]));
+        lane_pair_store(&t->Phi[30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[32]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[32]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][32]));
+        lane_pair_store(&t->Phi[32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[34]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[34]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][34]));
+        lane_pair_store(&t->Phi[34], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[36]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[36]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][36]));
+        lane_pair_store(&t->Phi[36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[38]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[38]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][38]));
+        lane_pair_store(&t->Phi[38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[40]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[40]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][40]));
+        lane_pair_store(&t->Phi[40], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[42]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[42]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][42]));
+        lane_pair_store(&t->Phi[42], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[44]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[44]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][44]));
+        lane_pair_store(&t->Phi[44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[46]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[46]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][46]));
+        lane_pair_store(&t->Phi[46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[48]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[48]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][48]));
+        lane_pair_store(&t->Phi[48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[50]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[50]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][50]));
+        lane_pair_store(&t->Phi[50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[52]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[52]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][52]));
+        lane_pair_store(&t->Phi[52], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[54]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[54]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][54]));
+        lane_pair_store(&t->Phi[54], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[56]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[56]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][56]));
+        lane_pair_store(&t->Phi[56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[58]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[58]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][58]));
+        lane_pair_store(&t->Phi[58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[60]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[60]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][60]));
+        lane_pair_store(&t->Phi[60], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[62]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[62]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][62]));
+        lane_pair_store(&t->Phi[62], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[64]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[64]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][64]));
+        lane_pair_store(&t->Phi[64], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[66]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[66]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][66]));
+        lane_pair_store(&t->Phi[66], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[68]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[68]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][68]));
+        lane_pair_store(&t->Phi[68], pair);
+    }
     t->Phi[70] = t->Phi[70] + t->Phi[70] + w->term[0][70];
-    t->Phi[73] = t->Phi[73] + t->Phi[73] + w->term[0][71];
-    t->Phi[74] = t->Phi[74] + t->Phi[74] + w->term[0][72];
-    w->S[0] = w->S[0] + half*w->term[1][0];
-    w->S[1] = w->S[1] + half*w->term[1][1];
-    w->S[2] = w->S[2] + half*w->term[1][2];
-    w->S[3] = w->S[3] + half*w->term[1][3];
-    w->S[4] = w->S[4] + half*w->term[1][4];
-    w->S[5] = w->S[5] + half*w->term[1][5];
-    w->S[58] = w->S[58] + half*w->term[1][6];
-    w->S[59] = w->S[59] + half*w->term[1][7];
-    w->S[6] = w->S[6] + half*w->term[1][8];
-    w->S[7] = w->S[7] + half*w->term[1][9];
-    w->S[8] = w->S[8] + half*w->term[1][10];
-    w->S[9] = w->S[9] + half*w->term[1][11];
-    w->S[10] = w->S[10] + half*w->term[1][12];
-    w->S[11] = w->S[11] + half*w->term[1][13];
-    w->S[12] = w->S[12] + half*w->term[1][14];
-    w->S[13] = w->S[13] + half*w->term[1][15];
-    w->S[60] = w->S[60] + half*w->term[1][16];
-    w->S[61] = w->S[61] + half*w->term[1][17];
-    w->S[14] = w->S[14] + half*w->term[1][18];
-    w->S[15] = w->S[15] + half*w->term[1][19];
-    w->S[16] = w->S[16] + half*w->term[1][20];
-    w->S[17] = w->S[17] + half*w->term[1][21];
-    w->S[18] = w->S[18] + half*w->term[1][22];
-    w->S[19] = w->S[19] + half*w->term[1][23];
-    w->S[20] = w->S[20] + half*w->term[1][24];
-    w->S[21] = w->S[21] + half*w->term[1][25];
-    w->S[62] = w->S[62] + half*w->term[1][26];
-    w->S[63] = w->S[63] + half*w->term[1][27];
-    w->S[22] = w->S[22] + half*w->term[1][28];
-    w->S[23] = w->S[23] + half*w->term[1][29];
-    w->S[24] = w->S[24] + half*w->term[1][30];
-    w->S[25] = w->S[25] + half*w->term[1][31];
-    w->S[26] = w->S[26] + half*w->term[1][32];
-    w->S[27] = w->S[27] + half*w->term[1][33];
-    w->S[28] = w->S[28] + half*w->term[1][34];
-    w->S[29] = w->S[29] + half*w->term[1][35];
-    w->S[64] = w->S[64] + half*w->term[1][36];
-    w->S[65] = w->S[65] + half*w->term[1][37];
-    w->S[30] = w->S[30] + half*w->term[1][38];
-    w->S[31] = w->S[31] + half*w->term[1][39];
-    w->S[32] = w->S[32] + half*w->term[1][40];
-    w->S[33] = w->S[33] + half*w->term[1][41];
-    w->S[34] = w->S[34] + half*w->term[1][42];
-    w->S[35] = w->S[35] + half*w->term[1][43];
-    w->S[36] = w->S[36] + half*w->term[1][44];
-    w->S[37] = w->S[37] + half*w->term[1][45];
-    w->S[66] = w->S[66] + half*w->term[1][46];
-    w->S[67] = w->S[67] + half*w->term[1][47];
-    w->S[38] = w->S[38] + half*w->term[1][48];
-    w->S[39] = w->S[39] + half*w->term[1][49];
-    w->S[40] = w->S[40] + half*w->term[1][50];
-    w->S[41] = w->S[41] + half*w->term[1][51];
-    w->S[42] = w->S[42] + half*w->term[1][52];
-    w->S[43] = w->S[43] + half*w->term[1][53];
-    w->S[44] = w->S[44] + half*w->term[1][54];
-    w->S[45] = w->S[45] + half*w->term[1][55];
-    w->S[68] = w->S[68] + half*w->term[1][56];
-    w->S[69] = w->S[69] + half*w->term[1][57];
-    w->S[46] = w->S[46] + half*w->term[1][58];
-    w->S[47] = w->S[47] + half*w->term[1][59];
-    w->S[48] = w->S[48] + half*w->term[1][60];
-    w->S[49] = w->S[49] + half*w->term[1][61];
-    w->S[50] = w->S[50] + half*w->term[1][62];
-    w->S[51] = w->S[51] + half*w->term[1][63];
-    w->S[52] = w->S[52] + half*w->term[1][64];
-    w->S[53] = w->S[53] + half*w->term[1][65];
-    w->S[70] = w->S[70] + half*w->term[1][66];
-    w->S[71] = w->S[71] + half*w->term[1][67];
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[73]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[73]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][71]));
+        lane_pair_store(&t->Phi[73], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[0]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][0]));
+        lane_pair_store(&w->S[0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[2]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][2]));
+        lane_pair_store(&w->S[2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[4]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][4]));
+        lane_pair_store(&w->S[4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[58]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][6]));
+        lane_pair_store(&w->S[58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[6]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][8]));
+        lane_pair_store(&w->S[6], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[8]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][10]));
+        lane_pair_store(&w->S[8], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[10]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][12]));
+        lane_pair_store(&w->S[10], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[12]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][14]));
+        lane_pair_store(&w->S[12], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[60]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][16]));
+        lane_pair_store(&w->S[60], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[14]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][18]));
+        lane_pair_store(&w->S[14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[16]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][20]));
+        lane_pair_store(&w->S[16], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[18]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][22]));
+        lane_pair_store(&w->S[18], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[20]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][24]));
+        lane_pair_store(&w->S[20], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[62]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][26]));
+        lane_pair_store(&w->S[62], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[22]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][28]));
+        lane_pair_store(&w->S[22], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[24]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][30]));
+        lane_pair_store(&w->S[24], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[26]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][32]));
+        lane_pair_store(&w->S[26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[28]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][34]));
+        lane_pair_store(&w->S[28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[64]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][36]));
+        lane_pair_store(&w->S[64], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[30]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][38]));
+        lane_pair_store(&w->S[30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[32]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][40]));
+        lane_pair_store(&w->S[32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[34]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][42]));
+        lane_pair_store(&w->S[34], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[36]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][44]));
+        lane_pair_store(&w->S[36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[66]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][46]));
+        lane_pair_store(&w->S[66], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[38]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][48]));
+        lane_pair_store(&w->S[38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[40]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][50]));
+        lane_pair_store(&w->S[40], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[42]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][52]));
+        lane_pair_store(&w->S[42], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[44]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][54]));
+        lane_pair_store(&w->S[44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[68]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][56]));
+        lane_pair_store(&w->S[68], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[46]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][58]));
+        lane_pair_store(&w->S[46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[48]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][60]));
+        lane_pair_store(&w->S[48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[50]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][62]));
+        lane_pair_store(&w->S[50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[52]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][64]));
+        lane_pair_store(&w->S[52], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[70]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][66]));
+        lane_pair_store(&w->S[70], pair);
+    }
     w->S[72] = w->S[72] + half*w->term[1][68];
-    w->S[54] = w->S[54] + half*w->term[1][69];
-    w->S[55] = w->S[55] + half*w->term[1][70];
-    w->S[56] = w->S[56] + half*w->term[1][71];
-    w->S[57] = w->S[57] + half*w->term[1][72];
+    {
+        lane_pair pair = lane_pair_load(&w->S[54]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][69]));
+        lane_pair_store(&w->S[54], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[56]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][71]));
+        lane_pair_store(&w->S[56], pair);
+    }
 }
 
 NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar
@@ -1560,8 +2438,11 @@ NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar
     t->Phi[44] = t->Phi[44] + one;
     t->Phi[55] = t->Phi[55] + one;
     t->Phi[66] = t->Phi[66] + one;
-    t->Phi[73] = t->Phi[73] + one;
-    t->Phi[74] = t->Phi[74] + one;
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[73]);
+        pair = lane_pair_add(pair, lane_pair_of(one, one));
+        lane_pair_store(&t->Phi[73], pair);
+    }
     v = t->Phi[0] + t->Phi[1] + t->Phi[2] + t->Phi[3] + t->Phi[4] + t->Phi[5] + t->Phi[6] +
             t->Phi[7] + t->Phi[8] + t->Phi[9] + t->Phi[10] + t->Phi[11] + t->Phi[12] + t->Phi[13] +
             t->Phi[14] + t->Phi[15] + t->Phi[16] + t->Phi[17] + t->Phi[18] + t->Phi[19] + t->Phi[20]
@@ -1580,8 +2461,10 @@ NED_DOPPLER13_REDUCED_BLOCK ned_doppler13_reduced_scalar
 NED_DOPPLER13_REDUCED_BLOCK void noise_input(const ned_doppler13_reduced_matrices *restrict m,
         ned_doppler13_reduced_discretize_scratch *restrict w)
 {
-    w->term[0][0] = w->S[6]*m->G[9];
-    w->term[0][1] = w->S[7]*m->G[10];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[6]), lane_pair_load(&m->G[9]));
+        lane_pair_store(&w->term[0][0], pair);
+    }
     w->term[0][2] = w->S[0]*m->G[0] + w->S[1]*m->G[1] + w->S[2]*m->G[2];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[3], w->S[3]),
@@ -1591,8 +2474,10 @@ NED_DOPPLER13_REDUCED_BLOCK void noise_input(const ned_doppler13_reduced_matrice
         lane_pair_store(&w->term[0][3], pair);
     }
     w->term[0][5] = w->S[3]*m->G[5] + w->S[4]*m->G[8];
-    w->term[0][6] = w->S[14]*m->G[9];
-    w->term[0][7] = w->S[15]*m->G[10];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[14]), lane_pair_load(&m->G[9]));
+        lane_pair_store(&w->term[0][6], pair);
+    }
     w->term[0][8] = w->S[8]*m->G[0] + w->S[9]*m->G[1] + w->S[10]*m->G[2];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[11], w->S[11]),
@@ -1602,8 +2487,10 @@ NED_DOPPLER13_REDUCED_BLOCK void noise_input(const ned_doppler13_reduced_matrice
         lane_pair_store(&w->term[0][9], pair);
     }
     w->term[0][11] = w->S[11]*m->G[5] + w->S[12]*m->G[8];
-    w->term[0][12] = w->S[22]*m->G[9];
-    w->term[0][13] = w->S[23]*m->G[10];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[22]), lane_pair_load(&m->G[9]));
+        lane_pair_store(&w->term[0][12], pair);
+    }
     w->term[0][14] = w->S[16]*m->G[0] + w->S[17]*m->G[1] + w->S[18]*m->G[2];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[19], w->S[19]),
@@ -1613,8 +2500,10 @@ NED_DOPPLER13_REDUCED_BLOCK void noise_input(const ned_doppler13_reduced_matrice
         lane_pair_store(&w->term[0][15], pair);
     }
     w->term[0][17] = w->S[19]*m->G[5] + w->S[20]*m->G[8];
-    w->term[0][18] = w->S[30]*m->G[9];
-    w->term[0][19] = w->S[31]*m->G[10];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[30]), lane_pair_load(&m->G[9]));
+        lane_pair_store(&w->term[0][18], pair);
+    }
     w->term[0][20] = w->S[24]*m->G[0] + w->S[25]*m->G[1] + w->S[26]*m->G[2];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[27], w->S[27]),
@@ -1624,8 +2513,10 @@ NED_DOPPLER13_REDUCED_BLOCK void noise_input(const ned_doppler13_reduced_matrice
         lane_pair_store(&w->term[0][21], pair);
     }
     w->term[0][23] = w->S[27]*m->G[5] + w->S[28]*m->G[8];
-    w->term[0][24] = w->S[38]*m->G[9];
-    w->term[0][25] = w->S[39]*m->G[10];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[38]), lane_pair_load(&m->G[9]));
+        lane_pair_store(&w->term[0][24], pair);
+    }
     w->term[0][26] = w->S[32]*m->G[0] + w->S[33]*m->G[1] + w->S[34]*m->G[2];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[35], w->S[35]),
@@ -1635,8 +2526,10 @@ NED_DOPPLER13_REDUCED_BLOCK void noise_input(const ned_doppler13_reduced_matrice
         lane_pair_store(&w->term[0][27], pair);
     }
     w->term[0][29] = w->S[35]*m->G[5] + w->S[36]*m->G[8];
-    w->term[0][30] = w->S[46]*m->G[9];
-    w->term[0][31] = w->S[47]*m->G[10];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[46]), lane_pair_load(&m->G[9]));
+        lane_pair_store(&w->term[0][30], pair);
+    }
     w->term[0][32] = w->S[40]*m->G[0] + w->S[41]*m->G[1] + w->S[42]*m->G[2];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[43], w->S[43]),
@@ -1646,8 +2539,10 @@ NED_DOPPLER13_REDUCED_BLOCK void noise_input(const ned_doppler13_reduced_matrice
         lane_pair_store(&w->term[0][33], pair);
     }
     w->term[0][35] = w->S[43]*m->G[5] + w->S[44]*m->G[8];
-    w->term[0][36] = w->S[54]*m->G[9];
-    w->term[0][37] = w->S[55]*m->G[10];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[54]), lane_pair_load(&m->G[9]));
+        lane_pair_store(&w->term[0][36], pair);
+    }
     w->term[0][38] = w->S[48]*m->G[0] + w->S[49]*m->G[1] + w->S[50]*m->G[2];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[51], w->S[51]),
@@ -1657,8 +2552,10 @@ NED_DOPPLER13_REDUCED_BLOCK void noise_input(const ned_doppler13_reduced_matrice
         lane_pair_store(&w->term[0][39], pair);
     }
     w->term[0][41] = w->S[51]*m->G[5] + w->S[52]*m->G[8];
-    w->term[0][42] = w->S[56]*m->G[9];
-    w->term[0][43] = w->S[57]*m->G[10];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[56]), lane_pair_load(&m->G[9]));
+        lane_pair_store(&w->term[0][42], pair);
+    }
 }
 
 NED_DOPPLER13_REDUCED_BLOCK void process_noise(const ned_doppler13_reduced_matrices *restrict m,
@@ -1721,52 +2618,30 @@ NED_DOPPLER13_REDUCED_BLOCK void process_noise(const ned_doppler13_reduced_matri
     w->term[1][41] = w->term[0][41]*w->term[1][49];
     w->term[1][42] = w->term[0][42]*w->term[1][44];
     w->term[1][43] = w->term[0][43]*w->term[1][45];
-    t->Qd[7] = 0;
-    t->Qd[8] = 0;
-    t->Qd[11] = 0;
-    t->Qd[12] = 0;
-    t->Qd[19] = 0;
-    t->Qd[20] = 0;
-    t->Qd[23] = 0;
-    t->Qd[24] = 0;
-    t->Qd[30] = 0;
-    t->Qd[31] = 0;
-    t->Qd[34] = 0;
-    t->Qd[35] = 0;
-    t->Qd[40] = 0;
-    t->Qd[41] = 0;
-    t->Qd[44] = 0;
-    t->Qd[45] = 0;
-    t->Qd[49] = 0;
-    t->Qd[50] = 0;
-    t->Qd[53] = 0;
-    t->Qd[54] = 0;
-    t->Qd[57] = 0;
-    t->Qd[58] = 0;
-    t->Qd[61] = 0;
-    t->Qd[62] = 0;
-    t->Qd[64] = 0;
-    t->Qd[65] = 0;
-    t->Qd[68] = 0;
-    t->Qd[69] = 0;
-    t->Qd[70] = 0;
-    t->Qd[71] = 0;
-    t->Qd[72] = 0;
-    t->Qd[73] = 0;
-    t->Qd[74] = 0;
-    t->Qd[75] = 0;
-    t->Qd[76] = 0;
-    t->Qd[77] = 0;
-    t->Qd[78] = 0;
-    t->Qd[79] = 0;
+    lane_pair_store(&t->Qd[7], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[11], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[19], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[23], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[30], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[34], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[40], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[44], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[49], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[53], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[57], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[61], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[64], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[68], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[70], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[72], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[74], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[76], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[78], lane_pair_of(0, 0));
     t->Qd[80] = 0;
-    t->Qd[82] = 0;
-    t->Qd[83] = 0;
+    lane_pair_store(&t->Qd[82], lane_pair_of(0, 0));
     t->Qd[84] = 0;
-    t->Qd[86] = 0;
-    t->Qd[87] = 0;
-    t->Qd[88] = 0;
-    t->Qd[89] = 0;
+    lane_pair_store(&t->Qd[86], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[88], lane_pair_of(0, 0));
     t->Qd[90] = 0;
 }
 

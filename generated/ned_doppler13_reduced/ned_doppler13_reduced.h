@@ -49,7 +49,7 @@ extern "C" {
 #define NED_DOPPLER13_REDUCED_N_PHI 77
 /* highest order of the Taylor series of discretize */
 #define NED_DOPPLER13_REDUCED_TAYLOR_ORDER 9
-#define NED_DOPPLER13_REDUCED_N_TERMS 73   /* entries of discretize's compressed term arrays */
+#define NED_DOPPLER13_REDUCED_N_TERMS 77   /* entries of discretize's compressed term arrays */
 #define NED_DOPPLER13_REDUCED_N_ACTIVE_ENTRIES 73   /* entries of Phi in rows that are not e_i */
 #define NED_DOPPLER13_REDUCED_FORM_COVARIANCE 1
 
@@ -186,11 +186,11 @@ typedef struct {
 /* Scratch memory of discretize. */
 typedef struct {
     ned_doppler13_reduced_scalar term[2][NED_DOPPLER13_REDUCED_N_TERMS]; /* the Horner chain's odd
-            levels R_k (term[1]); the doubling's new values; S G */
+            levels R_k (term[1]) and F h (term[0], each entry twice); the doubling's new values; S
+            G */
     ned_doppler13_reduced_scalar S[NED_DOPPLER13_REDUCED_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k
             + 1)! (and the even levels R_k): each block row's dense segment, then the diagonal
             rows */
-    ned_doppler13_reduced_scalar fh[NED_DOPPLER13_REDUCED_NNZ_F]; /* F h at the nonzeros of F */
     ned_doppler13_reduced_scalar row_sum[NED_DOPPLER13_REDUCED_N_STATES]; /* balancing: off-diagonal
             row sums of D^-1 |F| D */
     ned_doppler13_reduced_scalar col_sum[NED_DOPPLER13_REDUCED_N_STATES]; /* balancing: off-diagonal

@@ -448,61 +448,110 @@ static const signed char balance_exponent[NED_DOPPLER32_AUGMENTED_N_STATES] = { 
 static ned_doppler32_augmented_scalar balanced_norm(const ned_doppler32_augmented_matrices *restrict
         m)
 {
-    ned_doppler32_augmented_scalar v, norm = 0.0;
-    v = fabs(m->F[0]) + fabs(m->F[1]) * 2.0 + fabs(m->F[2]) * 8192.0 + fabs(m->F[3]) * 4.0 +
-            fabs(m->F[4]) * 3.637978807091713e-12 + fabs(m->F[5]) * 3.637978807091713e-12 +
-            fabs(m->F[6]) * 3.637978807091713e-12 + fabs(m->F[7]) * 3.637978807091713e-12 +
-            fabs(m->F[8]) * 3.637978807091713e-12 + fabs(m->F[9]) * 3.637978807091713e-12 +
-            fabs(m->F[10]) * 4.0 + fabs(m->F[11]) * 3.637978807091713e-12 + fabs(m->F[12]) *
-            3.637978807091713e-12 + fabs(m->F[13]) * 3.637978807091713e-12 + fabs(m->F[14]) *
-            3.637978807091713e-12 + fabs(m->F[15]) * 4.0 + fabs(m->F[16]) * 3.637978807091713e-12 +
-            fabs(m->F[17]) * 4.0 + fabs(m->F[18]) * 3.637978807091713e-12;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[19]) + fabs(m->F[20]) * 2.0 + fabs(m->F[21]) * 4096.0 + fabs(m->F[22]) *
-            3.637978807091713e-12 + fabs(m->F[23]) * 3.637978807091713e-12 + fabs(m->F[24]) *
-            3.637978807091713e-12 + fabs(m->F[25]) * 3.637978807091713e-12 + fabs(m->F[26]) *
-            3.637978807091713e-12 + fabs(m->F[27]) * 3.637978807091713e-12 + fabs(m->F[28]) * 4.0 +
-            fabs(m->F[29]) * 3.637978807091713e-12 + fabs(m->F[30]) * 3.637978807091713e-12 +
-            fabs(m->F[31]) * 3.637978807091713e-12 + fabs(m->F[32]) * 3.637978807091713e-12 +
-            fabs(m->F[33]) * 4.0 + fabs(m->F[34]) * 3.637978807091713e-12 + fabs(m->F[35]) * 4.0 +
-            fabs(m->F[36]) * 3.637978807091713e-12;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[37]) * 0.5 + fabs(m->F[38]) * 0.5 + fabs(m->F[39]) * 4096.0 + fabs(m->F[40]) * 2.0
-            + fabs(m->F[41]) * 1.8189894035458565e-12 + fabs(m->F[42]) * 1.8189894035458565e-12 +
-            fabs(m->F[43]) * 1.8189894035458565e-12 + fabs(m->F[44]) * 1.8189894035458565e-12 +
-            fabs(m->F[45]) * 1.8189894035458565e-12 + fabs(m->F[46]) * 1.8189894035458565e-12 +
-            fabs(m->F[47]) * 2.0 + fabs(m->F[48]) * 1.8189894035458565e-12 + fabs(m->F[49]) *
-            1.8189894035458565e-12 + fabs(m->F[50]) * 1.8189894035458565e-12 + fabs(m->F[51]) *
-            1.8189894035458565e-12 + fabs(m->F[52]) * 2.0 + fabs(m->F[53]) * 1.8189894035458565e-12
-            + fabs(m->F[54]) * 2.0 + fabs(m->F[55]) * 1.8189894035458565e-12;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[56]) * 0.000244140625 + fabs(m->F[57]) * 0.00048828125 + fabs(m->F[58]) +
-            fabs(m->F[59]) * 2.0 + fabs(m->F[60]) * 0.0009765625 + fabs(m->F[61]) *
-            8.881784197001252e-16 + fabs(m->F[62]) * 8.881784197001252e-16 + fabs(m->F[63]) *
-            0.0009765625 + fabs(m->F[64]) * 0.0009765625 + fabs(m->F[65]) * 8.881784197001252e-16 +
-            fabs(m->F[66]) * 0.0009765625;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[67]) * 0.0001220703125 + fabs(m->F[68]) * 0.000244140625 + fabs(m->F[69]) * 0.5 +
-            fabs(m->F[70]) + fabs(m->F[71]) * 0.00048828125 + fabs(m->F[72]) * 4.440892098500626e-16
-            + fabs(m->F[73]) * 4.440892098500626e-16 + fabs(m->F[74]) * 0.00048828125 +
-            fabs(m->F[75]) * 0.00048828125 + fabs(m->F[76]) * 4.440892098500626e-16 + fabs(m->F[77])
-            * 0.00048828125;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[78]) * 1024.0;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[79]) * 1.862645149230957e-09 + fabs(m->F[80]) * 9.094947017729282e-13;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[81]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[82]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[83]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[84]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[85]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[86]);
+    ned_doppler32_augmented_scalar norm = 0.0;
+    lane_pair lanes;
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[0]), fabs(m->F[37])), lane_pair_of(1.0, 0.5));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[1]), fabs(m->F[38])),
+            lane_pair_of(2.0, 0.5));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[2]), fabs(m->F[39])),
+            lane_pair_of(8192.0, 4096.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[3]), fabs(m->F[40])),
+            lane_pair_of(4.0, 2.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[4]), fabs(m->F[41])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[5]), fabs(m->F[42])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[6]), fabs(m->F[43])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[7]), fabs(m->F[44])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[8]), fabs(m->F[45])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[9]), fabs(m->F[46])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[10]), fabs(m->F[47])),
+            lane_pair_of(4.0, 2.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[11]), fabs(m->F[48])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[12]), fabs(m->F[49])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[13]), fabs(m->F[50])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[14]), fabs(m->F[51])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[15]), fabs(m->F[52])),
+            lane_pair_of(4.0, 2.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[16]), fabs(m->F[53])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[17]), fabs(m->F[54])),
+            lane_pair_of(4.0, 2.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[18]), fabs(m->F[55])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[19]), fabs(m->F[56])), lane_pair_of(1.0,
+            0.000244140625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[20]), fabs(m->F[57])),
+            lane_pair_of(2.0, 0.00048828125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[21]), fabs(m->F[58])),
+            lane_pair_of(4096.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[22]), fabs(m->F[59])),
+            lane_pair_of(3.637978807091713e-12, 2.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[23]), fabs(m->F[60])),
+            lane_pair_of(3.637978807091713e-12, 0.0009765625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[24]), fabs(m->F[61])),
+            lane_pair_of(3.637978807091713e-12, 8.881784197001252e-16));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[25]), fabs(m->F[62])),
+            lane_pair_of(3.637978807091713e-12, 8.881784197001252e-16));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[26]), fabs(m->F[63])),
+            lane_pair_of(3.637978807091713e-12, 0.0009765625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[27]), fabs(m->F[64])),
+            lane_pair_of(3.637978807091713e-12, 0.0009765625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[28]), fabs(m->F[65])),
+            lane_pair_of(4.0, 8.881784197001252e-16));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[29]), fabs(m->F[66])),
+            lane_pair_of(3.637978807091713e-12, 0.0009765625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[30]), 0.0),
+            lane_pair_of(3.637978807091713e-12, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[31]), 0.0),
+            lane_pair_of(3.637978807091713e-12, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[32]), 0.0),
+            lane_pair_of(3.637978807091713e-12, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[33]), 0.0), lane_pair_of(4.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[34]), 0.0),
+            lane_pair_of(3.637978807091713e-12, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[35]), 0.0), lane_pair_of(4.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[36]), 0.0),
+            lane_pair_of(3.637978807091713e-12, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[67]), fabs(m->F[79])),
+            lane_pair_of(0.0001220703125, 1.862645149230957e-09));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[68]), fabs(m->F[80])),
+            lane_pair_of(0.000244140625, 9.094947017729282e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[69]), 0.0), lane_pair_of(0.5, 1.0));
+    lanes = lane_pair_add(lanes, lane_pair_of(fabs(m->F[70]), 0.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[71]), 0.0),
+            lane_pair_of(0.00048828125, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[72]), 0.0),
+            lane_pair_of(4.440892098500626e-16, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[73]), 0.0),
+            lane_pair_of(4.440892098500626e-16, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[74]), 0.0),
+            lane_pair_of(0.00048828125, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[75]), 0.0),
+            lane_pair_of(0.00048828125, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[76]), 0.0),
+            lane_pair_of(4.440892098500626e-16, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[77]), 0.0),
+            lane_pair_of(0.00048828125, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[78]), fabs(m->F[81])), lane_pair_of(1024.0,
+            1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[82]), fabs(m->F[83]));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[84]), fabs(m->F[85]));
+    norm = lane_pair_max(lanes, norm);
+    const ned_doppler32_augmented_scalar v = fabs(m->F[86]);
     norm = v > norm ? v : norm;
     return norm;
 }
@@ -513,9 +562,13 @@ static ned_doppler32_augmented_scalar balanced_norm(const ned_doppler32_augmente
            balancing
    in powers of two, starting from the fixed D (at the check operating point one sweep finds it a
            fixed
-   point) and stopped at a fixed point; the sums in the reference's order (row by row). */
-static ned_doppler32_augmented_scalar rebalanced_norm(const ned_doppler32_augmented_matrices
-        *restrict m, ned_doppler32_augmented_discretize_scratch *restrict w)
+   point) and stopped at a fixed point; the sums in the reference's order (row by row).
+   Not inlined: it runs only when a doubling is at stake, and inlined, gcc -O2 would keep
+   balanced_norm's |F_ij| on the stack for it on every call (bench/bench_cycle.py: 130
+   instructions at 18 states). */
+NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar rebalanced_norm(const
+        ned_doppler32_augmented_matrices *restrict m, ned_doppler32_augmented_discretize_scratch
+        *restrict w)
 {
     ned_doppler32_augmented_scalar v, norm = 0.0;
     signed char exponent[NED_DOPPLER32_AUGMENTED_N_STATES]; /* within [-40, 40] */
@@ -1000,294 +1053,356 @@ NED_DOPPLER32_AUGMENTED_BLOCK void horner_input(const ned_doppler32_augmented_ma
         ned_doppler32_augmented_discretize_scratch *restrict w, const ned_doppler32_augmented_scalar
         h)
 {
-    w->fh[0] = m->F[0]*h;
-    w->fh[1] = m->F[1]*h;
-    w->fh[2] = m->F[2]*h;
-    w->fh[3] = m->F[3]*h;
-    w->fh[4] = m->F[4]*h;
-    w->fh[5] = m->F[5]*h;
-    w->fh[6] = m->F[6]*h;
-    w->fh[7] = m->F[7]*h;
-    w->fh[8] = m->F[8]*h;
-    w->fh[9] = m->F[9]*h;
-    w->fh[10] = m->F[10]*h;
-    w->fh[11] = m->F[11]*h;
-    w->fh[12] = m->F[12]*h;
-    w->fh[13] = m->F[13]*h;
-    w->fh[14] = m->F[14]*h;
-    w->fh[15] = m->F[15]*h;
-    w->fh[16] = m->F[16]*h;
-    w->fh[17] = m->F[17]*h;
-    w->fh[18] = m->F[18]*h;
-    w->fh[19] = m->F[19]*h;
-    w->fh[20] = m->F[20]*h;
-    w->fh[21] = m->F[21]*h;
-    w->fh[22] = m->F[22]*h;
-    w->fh[23] = m->F[23]*h;
-    w->fh[24] = m->F[24]*h;
-    w->fh[25] = m->F[25]*h;
-    w->fh[26] = m->F[26]*h;
-    w->fh[27] = m->F[27]*h;
-    w->fh[28] = m->F[28]*h;
-    w->fh[29] = m->F[29]*h;
-    w->fh[30] = m->F[30]*h;
-    w->fh[31] = m->F[31]*h;
-    w->fh[32] = m->F[32]*h;
-    w->fh[33] = m->F[33]*h;
-    w->fh[34] = m->F[34]*h;
-    w->fh[35] = m->F[35]*h;
-    w->fh[36] = m->F[36]*h;
-    w->fh[37] = m->F[37]*h;
-    w->fh[38] = m->F[38]*h;
-    w->fh[39] = m->F[39]*h;
-    w->fh[40] = m->F[40]*h;
-    w->fh[41] = m->F[41]*h;
-    w->fh[42] = m->F[42]*h;
-    w->fh[43] = m->F[43]*h;
-    w->fh[44] = m->F[44]*h;
-    w->fh[45] = m->F[45]*h;
-    w->fh[46] = m->F[46]*h;
-    w->fh[47] = m->F[47]*h;
-    w->fh[48] = m->F[48]*h;
-    w->fh[49] = m->F[49]*h;
-    w->fh[50] = m->F[50]*h;
-    w->fh[51] = m->F[51]*h;
-    w->fh[52] = m->F[52]*h;
-    w->fh[53] = m->F[53]*h;
-    w->fh[54] = m->F[54]*h;
-    w->fh[55] = m->F[55]*h;
-    w->fh[56] = m->F[56]*h;
-    w->fh[57] = m->F[57]*h;
-    w->fh[58] = m->F[58]*h;
-    w->fh[59] = m->F[59]*h;
-    w->fh[60] = m->F[60]*h;
-    w->fh[61] = m->F[61]*h;
-    w->fh[62] = m->F[62]*h;
-    w->fh[63] = m->F[63]*h;
-    w->fh[64] = m->F[64]*h;
-    w->fh[65] = m->F[65]*h;
-    w->fh[66] = m->F[66]*h;
-    w->fh[67] = m->F[67]*h;
-    w->fh[68] = m->F[68]*h;
-    w->fh[69] = m->F[69]*h;
-    w->fh[70] = m->F[70]*h;
-    w->fh[71] = m->F[71]*h;
-    w->fh[72] = m->F[72]*h;
-    w->fh[73] = m->F[73]*h;
-    w->fh[74] = m->F[74]*h;
-    w->fh[75] = m->F[75]*h;
-    w->fh[76] = m->F[76]*h;
-    w->fh[77] = m->F[77]*h;
-    w->fh[78] = m->F[78]*h;
-    w->fh[79] = m->F[79]*h;
-    w->fh[80] = m->F[80]*h;
-    w->fh[81] = m->F[81]*h;
-    w->fh[82] = m->F[82]*h;
-    w->fh[83] = m->F[83]*h;
-    w->fh[84] = m->F[84]*h;
-    w->fh[85] = m->F[85]*h;
-    w->fh[86] = m->F[86]*h;
+    ned_doppler32_augmented_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
+    lane_pair_store(&fh_pairs[0], lane_pair_of(m->F[0]*h, m->F[0]*h));
+    lane_pair_store(&fh_pairs[2], lane_pair_of(m->F[1]*h, m->F[1]*h));
+    lane_pair_store(&fh_pairs[4], lane_pair_of(m->F[2]*h, m->F[2]*h));
+    lane_pair_store(&fh_pairs[6], lane_pair_of(m->F[3]*h, m->F[3]*h));
+    lane_pair_store(&fh_pairs[8], lane_pair_of(m->F[4]*h, m->F[4]*h));
+    lane_pair_store(&fh_pairs[10], lane_pair_of(m->F[5]*h, m->F[5]*h));
+    lane_pair_store(&fh_pairs[12], lane_pair_of(m->F[6]*h, m->F[6]*h));
+    lane_pair_store(&fh_pairs[14], lane_pair_of(m->F[7]*h, m->F[7]*h));
+    lane_pair_store(&fh_pairs[16], lane_pair_of(m->F[8]*h, m->F[8]*h));
+    lane_pair_store(&fh_pairs[18], lane_pair_of(m->F[9]*h, m->F[9]*h));
+    lane_pair_store(&fh_pairs[20], lane_pair_of(m->F[10]*h, m->F[10]*h));
+    lane_pair_store(&fh_pairs[22], lane_pair_of(m->F[11]*h, m->F[11]*h));
+    lane_pair_store(&fh_pairs[24], lane_pair_of(m->F[12]*h, m->F[12]*h));
+    lane_pair_store(&fh_pairs[26], lane_pair_of(m->F[13]*h, m->F[13]*h));
+    lane_pair_store(&fh_pairs[28], lane_pair_of(m->F[14]*h, m->F[14]*h));
+    lane_pair_store(&fh_pairs[30], lane_pair_of(m->F[15]*h, m->F[15]*h));
+    lane_pair_store(&fh_pairs[32], lane_pair_of(m->F[16]*h, m->F[16]*h));
+    lane_pair_store(&fh_pairs[34], lane_pair_of(m->F[17]*h, m->F[17]*h));
+    lane_pair_store(&fh_pairs[36], lane_pair_of(m->F[18]*h, m->F[18]*h));
+    lane_pair_store(&fh_pairs[38], lane_pair_of(m->F[19]*h, m->F[19]*h));
+    lane_pair_store(&fh_pairs[40], lane_pair_of(m->F[20]*h, m->F[20]*h));
+    lane_pair_store(&fh_pairs[42], lane_pair_of(m->F[21]*h, m->F[21]*h));
+    lane_pair_store(&fh_pairs[44], lane_pair_of(m->F[22]*h, m->F[22]*h));
+    lane_pair_store(&fh_pairs[46], lane_pair_of(m->F[23]*h, m->F[23]*h));
+    lane_pair_store(&fh_pairs[48], lane_pair_of(m->F[24]*h, m->F[24]*h));
+    lane_pair_store(&fh_pairs[50], lane_pair_of(m->F[25]*h, m->F[25]*h));
+    lane_pair_store(&fh_pairs[52], lane_pair_of(m->F[26]*h, m->F[26]*h));
+    lane_pair_store(&fh_pairs[54], lane_pair_of(m->F[27]*h, m->F[27]*h));
+    lane_pair_store(&fh_pairs[56], lane_pair_of(m->F[28]*h, m->F[28]*h));
+    lane_pair_store(&fh_pairs[58], lane_pair_of(m->F[29]*h, m->F[29]*h));
+    lane_pair_store(&fh_pairs[60], lane_pair_of(m->F[30]*h, m->F[30]*h));
+    lane_pair_store(&fh_pairs[62], lane_pair_of(m->F[31]*h, m->F[31]*h));
+    lane_pair_store(&fh_pairs[64], lane_pair_of(m->F[32]*h, m->F[32]*h));
+    lane_pair_store(&fh_pairs[66], lane_pair_of(m->F[33]*h, m->F[33]*h));
+    lane_pair_store(&fh_pairs[68], lane_pair_of(m->F[34]*h, m->F[34]*h));
+    lane_pair_store(&fh_pairs[70], lane_pair_of(m->F[35]*h, m->F[35]*h));
+    lane_pair_store(&fh_pairs[72], lane_pair_of(m->F[36]*h, m->F[36]*h));
+    lane_pair_store(&fh_pairs[74], lane_pair_of(m->F[37]*h, m->F[37]*h));
+    lane_pair_store(&fh_pairs[76], lane_pair_of(m->F[38]*h, m->F[38]*h));
+    lane_pair_store(&fh_pairs[78], lane_pair_of(m->F[39]*h, m->F[39]*h));
+    lane_pair_store(&fh_pairs[80], lane_pair_of(m->F[40]*h, m->F[40]*h));
+    lane_pair_store(&fh_pairs[82], lane_pair_of(m->F[41]*h, m->F[41]*h));
+    lane_pair_store(&fh_pairs[84], lane_pair_of(m->F[42]*h, m->F[42]*h));
+    lane_pair_store(&fh_pairs[86], lane_pair_of(m->F[43]*h, m->F[43]*h));
+    lane_pair_store(&fh_pairs[88], lane_pair_of(m->F[44]*h, m->F[44]*h));
+    lane_pair_store(&fh_pairs[90], lane_pair_of(m->F[45]*h, m->F[45]*h));
+    lane_pair_store(&fh_pairs[92], lane_pair_of(m->F[46]*h, m->F[46]*h));
+    lane_pair_store(&fh_pairs[94], lane_pair_of(m->F[47]*h, m->F[47]*h));
+    lane_pair_store(&fh_pairs[96], lane_pair_of(m->F[48]*h, m->F[48]*h));
+    lane_pair_store(&fh_pairs[98], lane_pair_of(m->F[49]*h, m->F[49]*h));
+    lane_pair_store(&fh_pairs[100], lane_pair_of(m->F[50]*h, m->F[50]*h));
+    lane_pair_store(&fh_pairs[102], lane_pair_of(m->F[51]*h, m->F[51]*h));
+    lane_pair_store(&fh_pairs[104], lane_pair_of(m->F[52]*h, m->F[52]*h));
+    lane_pair_store(&fh_pairs[106], lane_pair_of(m->F[53]*h, m->F[53]*h));
+    lane_pair_store(&fh_pairs[108], lane_pair_of(m->F[54]*h, m->F[54]*h));
+    lane_pair_store(&fh_pairs[110], lane_pair_of(m->F[55]*h, m->F[55]*h));
+    lane_pair_store(&fh_pairs[112], lane_pair_of(m->F[56]*h, m->F[56]*h));
+    lane_pair_store(&fh_pairs[114], lane_pair_of(m->F[57]*h, m->F[57]*h));
+    lane_pair_store(&fh_pairs[116], lane_pair_of(m->F[58]*h, m->F[58]*h));
+    lane_pair_store(&fh_pairs[118], lane_pair_of(m->F[59]*h, m->F[59]*h));
+    lane_pair_store(&fh_pairs[120], lane_pair_of(m->F[60]*h, m->F[60]*h));
+    lane_pair_store(&fh_pairs[122], lane_pair_of(m->F[61]*h, m->F[61]*h));
+    lane_pair_store(&fh_pairs[124], lane_pair_of(m->F[62]*h, m->F[62]*h));
+    lane_pair_store(&fh_pairs[126], lane_pair_of(m->F[63]*h, m->F[63]*h));
+    lane_pair_store(&fh_pairs[128], lane_pair_of(m->F[64]*h, m->F[64]*h));
+    lane_pair_store(&fh_pairs[130], lane_pair_of(m->F[65]*h, m->F[65]*h));
+    lane_pair_store(&fh_pairs[132], lane_pair_of(m->F[66]*h, m->F[66]*h));
+    lane_pair_store(&fh_pairs[134], lane_pair_of(m->F[67]*h, m->F[67]*h));
+    lane_pair_store(&fh_pairs[136], lane_pair_of(m->F[68]*h, m->F[68]*h));
+    lane_pair_store(&fh_pairs[138], lane_pair_of(m->F[69]*h, m->F[69]*h));
+    lane_pair_store(&fh_pairs[140], lane_pair_of(m->F[70]*h, m->F[70]*h));
+    lane_pair_store(&fh_pairs[142], lane_pair_of(m->F[71]*h, m->F[71]*h));
+    lane_pair_store(&fh_pairs[144], lane_pair_of(m->F[72]*h, m->F[72]*h));
+    lane_pair_store(&fh_pairs[146], lane_pair_of(m->F[73]*h, m->F[73]*h));
+    lane_pair_store(&fh_pairs[148], lane_pair_of(m->F[74]*h, m->F[74]*h));
+    lane_pair_store(&fh_pairs[150], lane_pair_of(m->F[75]*h, m->F[75]*h));
+    lane_pair_store(&fh_pairs[152], lane_pair_of(m->F[76]*h, m->F[76]*h));
+    lane_pair_store(&fh_pairs[154], lane_pair_of(m->F[77]*h, m->F[77]*h));
+    lane_pair_store(&fh_pairs[156], lane_pair_of(m->F[78]*h, m->F[78]*h));
+    lane_pair_store(&fh_pairs[158], lane_pair_of(m->F[79]*h, m->F[79]*h));
+    lane_pair_store(&fh_pairs[160], lane_pair_of(m->F[80]*h, m->F[80]*h));
+    lane_pair_store(&fh_pairs[162], lane_pair_of(m->F[81]*h, m->F[81]*h));
+    lane_pair_store(&fh_pairs[164], lane_pair_of(m->F[82]*h, m->F[82]*h));
+    lane_pair_store(&fh_pairs[166], lane_pair_of(m->F[83]*h, m->F[83]*h));
+    lane_pair_store(&fh_pairs[168], lane_pair_of(m->F[84]*h, m->F[84]*h));
+    lane_pair_store(&fh_pairs[170], lane_pair_of(m->F[85]*h, m->F[85]*h));
+    lane_pair_store(&fh_pairs[172], lane_pair_of(m->F[86]*h, m->F[86]*h));
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void horner_level_1_into_S(ned_doppler32_augmented_discretize_scratch
         *restrict w, const ned_doppler32_augmented_scalar c_out, const
         ned_doppler32_augmented_scalar c_in)
 {
+    const ned_doppler32_augmented_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     w->S[0] = c_out;
-    w->S[1] = w->fh[0]*c_in;
-    w->S[2] = w->fh[1]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[0], fh_pairs[2]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[1], pair);
+    }
     w->S[3] = 0;
-    w->S[4] = w->fh[2]*c_in;
-    w->S[5] = w->fh[3]*c_in;
-    w->S[6] = w->fh[7]*c_in;
-    w->S[7] = w->fh[8]*c_in;
-    w->S[8] = w->fh[9]*c_in;
-    w->S[9] = 0;
-    w->S[10] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[4], fh_pairs[6]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[14], fh_pairs[16]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[6], pair);
+    }
+    w->S[8] = fh_pairs[18]*c_in;
+    lane_pair_store(&w->S[9], lane_pair_of(0, 0));
     w->S[11] = 0;
-    w->S[12] = w->fh[19]*c_in;
+    w->S[12] = fh_pairs[38]*c_in;
     w->S[13] = c_out;
-    w->S[14] = w->fh[20]*c_in;
-    w->S[15] = w->fh[21]*c_in;
-    w->S[16] = 0;
-    w->S[17] = 0;
-    w->S[18] = w->fh[25]*c_in;
-    w->S[19] = w->fh[26]*c_in;
-    w->S[20] = w->fh[27]*c_in;
-    w->S[21] = 0;
-    w->S[22] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[40], fh_pairs[42]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[14], pair);
+    }
+    lane_pair_store(&w->S[16], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[50], fh_pairs[52]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[18], pair);
+    }
+    w->S[20] = fh_pairs[54]*c_in;
+    lane_pair_store(&w->S[21], lane_pair_of(0, 0));
     w->S[23] = 0;
-    w->S[24] = w->fh[37]*c_in;
-    w->S[25] = w->fh[38]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[74], fh_pairs[76]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[24], pair);
+    }
     w->S[26] = c_out;
     w->S[27] = 0;
-    w->S[28] = w->fh[39]*c_in;
-    w->S[29] = w->fh[40]*c_in;
-    w->S[30] = w->fh[44]*c_in;
-    w->S[31] = w->fh[45]*c_in;
-    w->S[32] = w->fh[46]*c_in;
-    w->S[33] = 0;
-    w->S[34] = 0;
-    w->S[35] = 0;
-    w->S[36] = 0;
-    w->S[37] = w->fh[56]*c_in;
-    w->S[38] = w->fh[57]*c_in;
-    w->S[39] = c_out + w->fh[58]*c_in;
-    w->S[40] = w->fh[59]*c_in;
-    w->S[41] = w->fh[60]*c_in;
-    w->S[42] = 0;
-    w->S[43] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[78], fh_pairs[80]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[88], fh_pairs[90]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[30], pair);
+    }
+    w->S[32] = fh_pairs[92]*c_in;
+    lane_pair_store(&w->S[33], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[35], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[112], fh_pairs[114]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[37], pair);
+    }
+    w->S[39] = c_out + fh_pairs[116]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[118], fh_pairs[120]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[40], pair);
+    }
+    lane_pair_store(&w->S[42], lane_pair_of(0, 0));
     w->S[44] = 0;
-    w->S[45] = w->fh[61]*c_in;
-    w->S[46] = w->fh[62]*c_in;
-    w->S[47] = w->fh[63]*c_in;
-    w->S[48] = w->fh[67]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[122], fh_pairs[124]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[45], pair);
+    }
+    w->S[47] = fh_pairs[126]*c_in;
+    w->S[48] = fh_pairs[134]*c_in;
     w->S[49] = 0;
-    w->S[50] = w->fh[68]*c_in;
-    w->S[51] = w->fh[69]*c_in;
-    w->S[52] = c_out + w->fh[70]*c_in;
-    w->S[53] = w->fh[71]*c_in;
-    w->S[54] = 0;
-    w->S[55] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[136], fh_pairs[138]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[50], pair);
+    }
+    w->S[52] = c_out + fh_pairs[140]*c_in;
+    w->S[53] = fh_pairs[142]*c_in;
+    lane_pair_store(&w->S[54], lane_pair_of(0, 0));
     w->S[56] = 0;
-    w->S[57] = w->fh[72]*c_in;
-    w->S[58] = w->fh[73]*c_in;
-    w->S[59] = w->fh[74]*c_in;
-    w->S[60] = 0;
-    w->S[61] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[144], fh_pairs[146]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[57], pair);
+    }
+    w->S[59] = fh_pairs[148]*c_in;
+    lane_pair_store(&w->S[60], lane_pair_of(0, 0));
     w->S[62] = 0;
-    w->S[63] = w->fh[78]*c_in;
+    w->S[63] = fh_pairs[156]*c_in;
     w->S[64] = 0;
     w->S[65] = c_out;
-    w->S[66] = 0;
-    w->S[67] = 0;
-    w->S[68] = 0;
-    w->S[69] = 0;
-    w->S[70] = 0;
-    w->S[71] = 0;
-    w->S[72] = 0;
-    w->S[73] = 0;
-    w->S[74] = 0;
-    w->S[75] = 0;
-    w->S[76] = w->fh[79]*c_in;
-    w->S[77] = w->fh[80]*c_in;
-    w->S[78] = 0;
-    w->S[79] = 0;
-    w->S[80] = 0;
-    w->S[81] = 0;
-    w->S[82] = 0;
-    w->S[83] = 0;
-    w->S[84] = c_out + w->fh[81]*c_in;
-    w->S[85] = c_out + w->fh[82]*c_in;
-    w->S[86] = c_out + w->fh[83]*c_in;
-    w->S[87] = c_out + w->fh[84]*c_in;
-    w->S[88] = c_out + w->fh[85]*c_in;
-    w->S[89] = c_out + w->fh[86]*c_in;
-    w->S[90] = w->fh[4]*c_in;
-    w->S[91] = w->fh[5]*c_in;
-    w->S[92] = w->fh[6]*c_in;
-    w->S[93] = w->fh[10]*c_in;
-    w->S[94] = w->fh[11]*c_in;
-    w->S[95] = w->fh[12]*c_in;
-    w->S[96] = w->fh[13]*c_in;
-    w->S[97] = w->fh[14]*c_in;
-    w->S[98] = w->fh[15]*c_in;
-    w->S[99] = w->fh[16]*c_in;
-    w->S[100] = w->fh[17]*c_in;
-    w->S[101] = w->fh[18]*c_in;
-    w->S[102] = 0;
-    w->S[103] = 0;
+    lane_pair_store(&w->S[66], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[68], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[70], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[72], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[74], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[158], fh_pairs[160]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[76], pair);
+    }
+    lane_pair_store(&w->S[78], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[80], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[82], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[162], fh_pairs[164]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[166], fh_pairs[168]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[170], fh_pairs[172]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[88], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[8], fh_pairs[10]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[90], pair);
+    }
+    w->S[92] = fh_pairs[12]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[20], fh_pairs[22]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[93], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[24], fh_pairs[26]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[95], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[28], fh_pairs[30]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[97], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[32], fh_pairs[34]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[99], pair);
+    }
+    w->S[101] = fh_pairs[36]*c_in;
+    lane_pair_store(&w->S[102], lane_pair_of(0, 0));
     w->S[104] = 0;
-    w->S[105] = w->fh[22]*c_in;
-    w->S[106] = w->fh[23]*c_in;
-    w->S[107] = w->fh[24]*c_in;
-    w->S[108] = w->fh[28]*c_in;
-    w->S[109] = w->fh[29]*c_in;
-    w->S[110] = w->fh[30]*c_in;
-    w->S[111] = w->fh[31]*c_in;
-    w->S[112] = w->fh[32]*c_in;
-    w->S[113] = w->fh[33]*c_in;
-    w->S[114] = w->fh[34]*c_in;
-    w->S[115] = w->fh[35]*c_in;
-    w->S[116] = w->fh[36]*c_in;
-    w->S[117] = 0;
-    w->S[118] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[44], fh_pairs[46]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[105], pair);
+    }
+    w->S[107] = fh_pairs[48]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[56], fh_pairs[58]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[108], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[60], fh_pairs[62]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[110], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[64], fh_pairs[66]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[112], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[68], fh_pairs[70]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[114], pair);
+    }
+    w->S[116] = fh_pairs[72]*c_in;
+    lane_pair_store(&w->S[117], lane_pair_of(0, 0));
     w->S[119] = 0;
-    w->S[120] = w->fh[41]*c_in;
-    w->S[121] = w->fh[42]*c_in;
-    w->S[122] = w->fh[43]*c_in;
-    w->S[123] = w->fh[47]*c_in;
-    w->S[124] = w->fh[48]*c_in;
-    w->S[125] = w->fh[49]*c_in;
-    w->S[126] = w->fh[50]*c_in;
-    w->S[127] = w->fh[51]*c_in;
-    w->S[128] = w->fh[52]*c_in;
-    w->S[129] = w->fh[53]*c_in;
-    w->S[130] = w->fh[54]*c_in;
-    w->S[131] = w->fh[55]*c_in;
-    w->S[132] = 0;
-    w->S[133] = 0;
-    w->S[134] = 0;
-    w->S[135] = 0;
-    w->S[136] = 0;
-    w->S[137] = 0;
-    w->S[138] = 0;
-    w->S[139] = 0;
-    w->S[140] = 0;
-    w->S[141] = 0;
-    w->S[142] = 0;
-    w->S[143] = 0;
-    w->S[144] = 0;
-    w->S[145] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[82], fh_pairs[84]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[120], pair);
+    }
+    w->S[122] = fh_pairs[86]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[94], fh_pairs[96]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[123], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[98], fh_pairs[100]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[125], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[102], fh_pairs[104]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[127], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[106], fh_pairs[108]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[129], pair);
+    }
+    w->S[131] = fh_pairs[110]*c_in;
+    lane_pair_store(&w->S[132], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[134], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[136], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[138], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[140], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[142], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[144], lane_pair_of(0, 0));
     w->S[146] = 0;
-    w->S[147] = w->fh[64]*c_in;
-    w->S[148] = w->fh[65]*c_in;
-    w->S[149] = w->fh[66]*c_in;
-    w->S[150] = 0;
-    w->S[151] = 0;
-    w->S[152] = 0;
-    w->S[153] = 0;
-    w->S[154] = 0;
-    w->S[155] = 0;
-    w->S[156] = 0;
-    w->S[157] = 0;
-    w->S[158] = 0;
-    w->S[159] = 0;
-    w->S[160] = 0;
-    w->S[161] = 0;
-    w->S[162] = w->fh[75]*c_in;
-    w->S[163] = w->fh[76]*c_in;
-    w->S[164] = w->fh[77]*c_in;
-    w->S[165] = 0;
-    w->S[166] = 0;
-    w->S[167] = 0;
-    w->S[168] = 0;
-    w->S[169] = 0;
-    w->S[170] = 0;
-    w->S[171] = 0;
-    w->S[172] = 0;
-    w->S[173] = 0;
-    w->S[174] = 0;
-    w->S[175] = 0;
-    w->S[176] = 0;
-    w->S[177] = 0;
-    w->S[178] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[128], fh_pairs[130]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[147], pair);
+    }
+    w->S[149] = fh_pairs[132]*c_in;
+    lane_pair_store(&w->S[150], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[152], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[154], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[156], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[158], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[160], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[150], fh_pairs[152]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[162], pair);
+    }
+    w->S[164] = fh_pairs[154]*c_in;
+    lane_pair_store(&w->S[165], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[167], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[169], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[171], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[173], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[175], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[177], lane_pair_of(0, 0));
     w->S[179] = 0;
     w->S[180] = c_out;
-    w->S[181] = 0;
-    w->S[182] = 0;
-    w->S[183] = 0;
-    w->S[184] = 0;
-    w->S[185] = 0;
-    w->S[186] = 0;
-    w->S[187] = 0;
-    w->S[188] = 0;
-    w->S[189] = 0;
-    w->S[190] = 0;
-    w->S[191] = 0;
-    w->S[192] = 0;
-    w->S[193] = 0;
-    w->S[194] = 0;
+    lane_pair_store(&w->S[181], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[183], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[185], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[187], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[189], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[191], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[193], lane_pair_of(0, 0));
     w->S[195] = 0;
 }
 
@@ -1295,201 +1410,262 @@ NED_DOPPLER32_AUGMENTED_BLOCK void
         horner_level_1_into_term(ned_doppler32_augmented_discretize_scratch *restrict w, const
         ned_doppler32_augmented_scalar c_out, const ned_doppler32_augmented_scalar c_in)
 {
+    const ned_doppler32_augmented_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     w->term[1][0] = c_out;
-    w->term[1][1] = w->fh[0]*c_in;
-    w->term[1][2] = w->fh[1]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[0], fh_pairs[2]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][1], pair);
+    }
     w->term[1][3] = 0;
-    w->term[1][4] = w->fh[2]*c_in;
-    w->term[1][5] = w->fh[3]*c_in;
-    w->term[1][6] = w->fh[7]*c_in;
-    w->term[1][7] = w->fh[8]*c_in;
-    w->term[1][8] = w->fh[9]*c_in;
-    w->term[1][9] = 0;
-    w->term[1][10] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[4], fh_pairs[6]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[14], fh_pairs[16]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][6], pair);
+    }
+    w->term[1][8] = fh_pairs[18]*c_in;
+    lane_pair_store(&w->term[1][9], lane_pair_of(0, 0));
     w->term[1][11] = 0;
-    w->term[1][12] = w->fh[19]*c_in;
+    w->term[1][12] = fh_pairs[38]*c_in;
     w->term[1][13] = c_out;
-    w->term[1][14] = w->fh[20]*c_in;
-    w->term[1][15] = w->fh[21]*c_in;
-    w->term[1][16] = 0;
-    w->term[1][17] = 0;
-    w->term[1][18] = w->fh[25]*c_in;
-    w->term[1][19] = w->fh[26]*c_in;
-    w->term[1][20] = w->fh[27]*c_in;
-    w->term[1][21] = 0;
-    w->term[1][22] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[40], fh_pairs[42]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][14], pair);
+    }
+    lane_pair_store(&w->term[1][16], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[50], fh_pairs[52]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][18], pair);
+    }
+    w->term[1][20] = fh_pairs[54]*c_in;
+    lane_pair_store(&w->term[1][21], lane_pair_of(0, 0));
     w->term[1][23] = 0;
-    w->term[1][24] = w->fh[37]*c_in;
-    w->term[1][25] = w->fh[38]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[74], fh_pairs[76]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][24], pair);
+    }
     w->term[1][26] = c_out;
     w->term[1][27] = 0;
-    w->term[1][28] = w->fh[39]*c_in;
-    w->term[1][29] = w->fh[40]*c_in;
-    w->term[1][30] = w->fh[44]*c_in;
-    w->term[1][31] = w->fh[45]*c_in;
-    w->term[1][32] = w->fh[46]*c_in;
-    w->term[1][33] = 0;
-    w->term[1][34] = 0;
-    w->term[1][35] = 0;
-    w->term[1][36] = 0;
-    w->term[1][37] = w->fh[56]*c_in;
-    w->term[1][38] = w->fh[57]*c_in;
-    w->term[1][39] = c_out + w->fh[58]*c_in;
-    w->term[1][40] = w->fh[59]*c_in;
-    w->term[1][41] = w->fh[60]*c_in;
-    w->term[1][42] = 0;
-    w->term[1][43] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[78], fh_pairs[80]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[88], fh_pairs[90]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][30], pair);
+    }
+    w->term[1][32] = fh_pairs[92]*c_in;
+    lane_pair_store(&w->term[1][33], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][35], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[112], fh_pairs[114]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][37], pair);
+    }
+    w->term[1][39] = c_out + fh_pairs[116]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[118], fh_pairs[120]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][40], pair);
+    }
+    lane_pair_store(&w->term[1][42], lane_pair_of(0, 0));
     w->term[1][44] = 0;
-    w->term[1][45] = w->fh[61]*c_in;
-    w->term[1][46] = w->fh[62]*c_in;
-    w->term[1][47] = w->fh[63]*c_in;
-    w->term[1][48] = w->fh[67]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[122], fh_pairs[124]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][45], pair);
+    }
+    w->term[1][47] = fh_pairs[126]*c_in;
+    w->term[1][48] = fh_pairs[134]*c_in;
     w->term[1][49] = 0;
-    w->term[1][50] = w->fh[68]*c_in;
-    w->term[1][51] = w->fh[69]*c_in;
-    w->term[1][52] = c_out + w->fh[70]*c_in;
-    w->term[1][53] = w->fh[71]*c_in;
-    w->term[1][54] = 0;
-    w->term[1][55] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[136], fh_pairs[138]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][50], pair);
+    }
+    w->term[1][52] = c_out + fh_pairs[140]*c_in;
+    w->term[1][53] = fh_pairs[142]*c_in;
+    lane_pair_store(&w->term[1][54], lane_pair_of(0, 0));
     w->term[1][56] = 0;
-    w->term[1][57] = w->fh[72]*c_in;
-    w->term[1][58] = w->fh[73]*c_in;
-    w->term[1][59] = w->fh[74]*c_in;
-    w->term[1][60] = 0;
-    w->term[1][61] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[144], fh_pairs[146]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][57], pair);
+    }
+    w->term[1][59] = fh_pairs[148]*c_in;
+    lane_pair_store(&w->term[1][60], lane_pair_of(0, 0));
     w->term[1][62] = 0;
-    w->term[1][63] = w->fh[78]*c_in;
+    w->term[1][63] = fh_pairs[156]*c_in;
     w->term[1][64] = 0;
     w->term[1][65] = c_out;
-    w->term[1][66] = 0;
-    w->term[1][67] = 0;
-    w->term[1][68] = 0;
-    w->term[1][69] = 0;
-    w->term[1][70] = 0;
-    w->term[1][71] = 0;
-    w->term[1][72] = 0;
-    w->term[1][73] = 0;
-    w->term[1][74] = 0;
-    w->term[1][75] = 0;
-    w->term[1][76] = w->fh[79]*c_in;
-    w->term[1][77] = w->fh[80]*c_in;
-    w->term[1][78] = 0;
-    w->term[1][79] = 0;
-    w->term[1][80] = 0;
-    w->term[1][81] = 0;
-    w->term[1][82] = 0;
-    w->term[1][83] = 0;
-    w->term[1][84] = c_out + w->fh[81]*c_in;
-    w->term[1][85] = c_out + w->fh[82]*c_in;
-    w->term[1][86] = c_out + w->fh[83]*c_in;
-    w->term[1][87] = c_out + w->fh[84]*c_in;
-    w->term[1][88] = c_out + w->fh[85]*c_in;
-    w->term[1][89] = c_out + w->fh[86]*c_in;
-    w->term[1][90] = w->fh[4]*c_in;
-    w->term[1][91] = w->fh[5]*c_in;
-    w->term[1][92] = w->fh[6]*c_in;
-    w->term[1][93] = w->fh[10]*c_in;
-    w->term[1][94] = w->fh[11]*c_in;
-    w->term[1][95] = w->fh[12]*c_in;
-    w->term[1][96] = w->fh[13]*c_in;
-    w->term[1][97] = w->fh[14]*c_in;
-    w->term[1][98] = w->fh[15]*c_in;
-    w->term[1][99] = w->fh[16]*c_in;
-    w->term[1][100] = w->fh[17]*c_in;
-    w->term[1][101] = w->fh[18]*c_in;
-    w->term[1][102] = 0;
-    w->term[1][103] = 0;
+    lane_pair_store(&w->term[1][66], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][68], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][70], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][72], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][74], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[158], fh_pairs[160]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][76], pair);
+    }
+    lane_pair_store(&w->term[1][78], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][80], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][82], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[162], fh_pairs[164]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[166], fh_pairs[168]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[170], fh_pairs[172]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][88], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[8], fh_pairs[10]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][90], pair);
+    }
+    w->term[1][92] = fh_pairs[12]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[20], fh_pairs[22]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][93], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[24], fh_pairs[26]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][95], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[28], fh_pairs[30]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][97], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[32], fh_pairs[34]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][99], pair);
+    }
+    w->term[1][101] = fh_pairs[36]*c_in;
+    lane_pair_store(&w->term[1][102], lane_pair_of(0, 0));
     w->term[1][104] = 0;
-    w->term[1][105] = w->fh[22]*c_in;
-    w->term[1][106] = w->fh[23]*c_in;
-    w->term[1][107] = w->fh[24]*c_in;
-    w->term[1][108] = w->fh[28]*c_in;
-    w->term[1][109] = w->fh[29]*c_in;
-    w->term[1][110] = w->fh[30]*c_in;
-    w->term[1][111] = w->fh[31]*c_in;
-    w->term[1][112] = w->fh[32]*c_in;
-    w->term[1][113] = w->fh[33]*c_in;
-    w->term[1][114] = w->fh[34]*c_in;
-    w->term[1][115] = w->fh[35]*c_in;
-    w->term[1][116] = w->fh[36]*c_in;
-    w->term[1][117] = 0;
-    w->term[1][118] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[44], fh_pairs[46]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][105], pair);
+    }
+    w->term[1][107] = fh_pairs[48]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[56], fh_pairs[58]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][108], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[60], fh_pairs[62]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][110], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[64], fh_pairs[66]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][112], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[68], fh_pairs[70]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][114], pair);
+    }
+    w->term[1][116] = fh_pairs[72]*c_in;
+    lane_pair_store(&w->term[1][117], lane_pair_of(0, 0));
     w->term[1][119] = 0;
-    w->term[1][120] = w->fh[41]*c_in;
-    w->term[1][121] = w->fh[42]*c_in;
-    w->term[1][122] = w->fh[43]*c_in;
-    w->term[1][123] = w->fh[47]*c_in;
-    w->term[1][124] = w->fh[48]*c_in;
-    w->term[1][125] = w->fh[49]*c_in;
-    w->term[1][126] = w->fh[50]*c_in;
-    w->term[1][127] = w->fh[51]*c_in;
-    w->term[1][128] = w->fh[52]*c_in;
-    w->term[1][129] = w->fh[53]*c_in;
-    w->term[1][130] = w->fh[54]*c_in;
-    w->term[1][131] = w->fh[55]*c_in;
-    w->term[1][132] = 0;
-    w->term[1][133] = 0;
-    w->term[1][134] = 0;
-    w->term[1][135] = 0;
-    w->term[1][136] = 0;
-    w->term[1][137] = 0;
-    w->term[1][138] = 0;
-    w->term[1][139] = 0;
-    w->term[1][140] = 0;
-    w->term[1][141] = 0;
-    w->term[1][142] = 0;
-    w->term[1][143] = 0;
-    w->term[1][144] = 0;
-    w->term[1][145] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[82], fh_pairs[84]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][120], pair);
+    }
+    w->term[1][122] = fh_pairs[86]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[94], fh_pairs[96]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][123], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[98], fh_pairs[100]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][125], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[102], fh_pairs[104]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][127], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[106], fh_pairs[108]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][129], pair);
+    }
+    w->term[1][131] = fh_pairs[110]*c_in;
+    lane_pair_store(&w->term[1][132], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][134], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][136], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][138], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][140], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][142], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][144], lane_pair_of(0, 0));
     w->term[1][146] = 0;
-    w->term[1][147] = w->fh[64]*c_in;
-    w->term[1][148] = w->fh[65]*c_in;
-    w->term[1][149] = w->fh[66]*c_in;
-    w->term[1][150] = 0;
-    w->term[1][151] = 0;
-    w->term[1][152] = 0;
-    w->term[1][153] = 0;
-    w->term[1][154] = 0;
-    w->term[1][155] = 0;
-    w->term[1][156] = 0;
-    w->term[1][157] = 0;
-    w->term[1][158] = 0;
-    w->term[1][159] = 0;
-    w->term[1][160] = 0;
-    w->term[1][161] = 0;
-    w->term[1][162] = w->fh[75]*c_in;
-    w->term[1][163] = w->fh[76]*c_in;
-    w->term[1][164] = w->fh[77]*c_in;
-    w->term[1][165] = 0;
-    w->term[1][166] = 0;
-    w->term[1][167] = 0;
-    w->term[1][168] = 0;
-    w->term[1][169] = 0;
-    w->term[1][170] = 0;
-    w->term[1][171] = 0;
-    w->term[1][172] = 0;
-    w->term[1][173] = 0;
-    w->term[1][174] = 0;
-    w->term[1][175] = 0;
-    w->term[1][176] = 0;
-    w->term[1][177] = 0;
-    w->term[1][178] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[128], fh_pairs[130]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][147], pair);
+    }
+    w->term[1][149] = fh_pairs[132]*c_in;
+    lane_pair_store(&w->term[1][150], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][152], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][154], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][156], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][158], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][160], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[150], fh_pairs[152]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][162], pair);
+    }
+    w->term[1][164] = fh_pairs[154]*c_in;
+    lane_pair_store(&w->term[1][165], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][167], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][169], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][171], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][173], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][175], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][177], lane_pair_of(0, 0));
     w->term[1][179] = 0;
     w->term[1][180] = c_out;
-    w->term[1][181] = 0;
-    w->term[1][182] = 0;
-    w->term[1][183] = 0;
-    w->term[1][184] = 0;
-    w->term[1][185] = 0;
-    w->term[1][186] = 0;
-    w->term[1][187] = 0;
-    w->term[1][188] = 0;
-    w->term[1][189] = 0;
-    w->term[1][190] = 0;
-    w->term[1][191] = 0;
-    w->term[1][192] = 0;
-    w->term[1][193] = 0;
-    w->term[1][194] = 0;
+    lane_pair_store(&w->term[1][181], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][183], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][185], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][187], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][189], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][191], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][193], lane_pair_of(0, 0));
     w->term[1][195] = 0;
 }
 
@@ -1497,1039 +1673,1584 @@ NED_DOPPLER32_AUGMENTED_BLOCK void
         horner_saturated_into_S(ned_doppler32_augmented_discretize_scratch *restrict w, const
         ned_doppler32_augmented_scalar c_out)
 {
+    const ned_doppler32_augmented_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 12; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][12+k] + w->fh[1]*w->term[1][24+k] + w->fh[2]*w->term[1][48+k]
-                + w->fh[3]*w->term[1][60+k];
-        w->S[12+k] = w->fh[19]*w->term[1][k] + w->fh[20]*w->term[1][24+k] +
-                w->fh[21]*w->term[1][36+k];
-        w->S[24+k] = w->fh[37]*w->term[1][k] + w->fh[38]*w->term[1][12+k] +
-                w->fh[39]*w->term[1][48+k] + w->fh[40]*w->term[1][60+k];
-        w->S[36+k] = w->fh[56]*w->term[1][12+k] + w->fh[57]*w->term[1][24+k] +
-                w->fh[58]*w->term[1][36+k] + w->fh[59]*w->term[1][48+k] +
-                w->fh[60]*w->term[1][60+k];
-        w->S[48+k] = w->fh[67]*w->term[1][k] + w->fh[68]*w->term[1][24+k] +
-                w->fh[69]*w->term[1][36+k] + w->fh[70]*w->term[1][48+k] +
-                w->fh[71]*w->term[1][60+k];
-        w->S[60+k] = w->fh[78]*w->term[1][36+k];
+    for (k = 0; k < 12; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->term[1][12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->term[1][60+k]));
+        lane_pair_store(&w->S[k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->term[1][36+k]));
+        lane_pair_store(&w->S[12+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->term[1][12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->term[1][60+k]));
+        lane_pair_store(&w->S[24+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->term[1][12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[116]),
+                lane_pair_load(&w->term[1][36+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[118]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[120]),
+                lane_pair_load(&w->term[1][60+k]));
+        lane_pair_store(&w->S[36+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[134]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[136]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[138]),
+                lane_pair_load(&w->term[1][36+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[140]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[142]),
+                lane_pair_load(&w->term[1][60+k]));
+        lane_pair_store(&w->S[48+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[156]),
+                lane_pair_load(&w->term[1][36+k]));
+        lane_pair_store(&w->S[60+k], lanes);
     }
     w->S[0] = w->S[0] + c_out;
-    w->S[6] = w->S[6] + w->fh[7]*w->term[1][84];
-    w->S[7] = w->S[7] + w->fh[8]*w->term[1][85];
-    w->S[8] = w->S[8] + w->fh[9]*w->term[1][86];
+    w->S[6] = w->S[6] + fh_pairs[14]*w->term[1][84];
+    w->S[7] = w->S[7] + fh_pairs[16]*w->term[1][85];
+    w->S[8] = w->S[8] + fh_pairs[18]*w->term[1][86];
     w->S[13] = w->S[13] + c_out;
-    w->S[18] = w->S[18] + w->fh[25]*w->term[1][84];
-    w->S[19] = w->S[19] + w->fh[26]*w->term[1][85];
-    w->S[20] = w->S[20] + w->fh[27]*w->term[1][86];
+    w->S[18] = w->S[18] + fh_pairs[50]*w->term[1][84];
+    w->S[19] = w->S[19] + fh_pairs[52]*w->term[1][85];
+    w->S[20] = w->S[20] + fh_pairs[54]*w->term[1][86];
     w->S[26] = w->S[26] + c_out;
-    w->S[30] = w->S[30] + w->fh[44]*w->term[1][84];
-    w->S[31] = w->S[31] + w->fh[45]*w->term[1][85];
-    w->S[32] = w->S[32] + w->fh[46]*w->term[1][86];
+    w->S[30] = w->S[30] + fh_pairs[88]*w->term[1][84];
+    w->S[31] = w->S[31] + fh_pairs[90]*w->term[1][85];
+    w->S[32] = w->S[32] + fh_pairs[92]*w->term[1][86];
     w->S[39] = w->S[39] + c_out;
-    w->S[45] = w->S[45] + w->fh[61]*w->term[1][87];
-    w->S[46] = w->S[46] + w->fh[62]*w->term[1][88];
-    w->S[47] = w->S[47] + w->fh[63]*w->term[1][89];
+    w->S[45] = w->S[45] + fh_pairs[122]*w->term[1][87];
+    w->S[46] = w->S[46] + fh_pairs[124]*w->term[1][88];
+    w->S[47] = w->S[47] + fh_pairs[126]*w->term[1][89];
     w->S[52] = w->S[52] + c_out;
-    w->S[57] = w->S[57] + w->fh[72]*w->term[1][87];
-    w->S[58] = w->S[58] + w->fh[73]*w->term[1][88];
-    w->S[59] = w->S[59] + w->fh[74]*w->term[1][89];
+    w->S[57] = w->S[57] + fh_pairs[144]*w->term[1][87];
+    w->S[58] = w->S[58] + fh_pairs[146]*w->term[1][88];
+    w->S[59] = w->S[59] + fh_pairs[148]*w->term[1][89];
     w->S[65] = w->S[65] + c_out;
-    w->S[84] = c_out + w->fh[81]*w->term[1][84];
-    w->S[85] = c_out + w->fh[82]*w->term[1][85];
-    w->S[86] = c_out + w->fh[83]*w->term[1][86];
-    w->S[87] = c_out + w->fh[84]*w->term[1][87];
-    w->S[88] = c_out + w->fh[85]*w->term[1][88];
-    w->S[89] = c_out + w->fh[86]*w->term[1][89];
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[162], fh_pairs[164]),
+                lane_pair_load(&w->term[1][84]));
+        lane_pair_store(&w->S[84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[166], fh_pairs[168]),
+                lane_pair_load(&w->term[1][86]));
+        lane_pair_store(&w->S[86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[170], fh_pairs[172]),
+                lane_pair_load(&w->term[1][88]));
+        lane_pair_store(&w->S[88], pair);
+    }
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void
         horner_saturated_into_term(ned_doppler32_augmented_discretize_scratch *restrict w, const
         ned_doppler32_augmented_scalar c_out)
 {
+    const ned_doppler32_augmented_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 12; ++k) {
-        w->term[1][k] = w->fh[0]*w->S[12+k] + w->fh[1]*w->S[24+k] + w->fh[2]*w->S[48+k] +
-                w->fh[3]*w->S[60+k];
-        w->term[1][12+k] = w->fh[19]*w->S[k] + w->fh[20]*w->S[24+k] + w->fh[21]*w->S[36+k];
-        w->term[1][24+k] = w->fh[37]*w->S[k] + w->fh[38]*w->S[12+k] + w->fh[39]*w->S[48+k] +
-                w->fh[40]*w->S[60+k];
-        w->term[1][36+k] = w->fh[56]*w->S[12+k] + w->fh[57]*w->S[24+k] + w->fh[58]*w->S[36+k] +
-                w->fh[59]*w->S[48+k] + w->fh[60]*w->S[60+k];
-        w->term[1][48+k] = w->fh[67]*w->S[k] + w->fh[68]*w->S[24+k] + w->fh[69]*w->S[36+k] +
-                w->fh[70]*w->S[48+k] + w->fh[71]*w->S[60+k];
-        w->term[1][60+k] = w->fh[78]*w->S[36+k];
+    for (k = 0; k < 12; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->S[12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[60+k]));
+        lane_pair_store(&w->term[1][k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[36+k]));
+        lane_pair_store(&w->term[1][12+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[60+k]));
+        lane_pair_store(&w->term[1][24+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->S[12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[116]),
+                lane_pair_load(&w->S[36+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[118]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[120]),
+                lane_pair_load(&w->S[60+k]));
+        lane_pair_store(&w->term[1][36+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[134]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[136]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[138]),
+                lane_pair_load(&w->S[36+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[140]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[142]),
+                lane_pair_load(&w->S[60+k]));
+        lane_pair_store(&w->term[1][48+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[156]),
+                lane_pair_load(&w->S[36+k]));
+        lane_pair_store(&w->term[1][60+k], lanes);
     }
     w->term[1][0] = w->term[1][0] + c_out;
-    w->term[1][6] = w->term[1][6] + w->fh[7]*w->S[84];
-    w->term[1][7] = w->term[1][7] + w->fh[8]*w->S[85];
-    w->term[1][8] = w->term[1][8] + w->fh[9]*w->S[86];
+    w->term[1][6] = w->term[1][6] + fh_pairs[14]*w->S[84];
+    w->term[1][7] = w->term[1][7] + fh_pairs[16]*w->S[85];
+    w->term[1][8] = w->term[1][8] + fh_pairs[18]*w->S[86];
     w->term[1][13] = w->term[1][13] + c_out;
-    w->term[1][18] = w->term[1][18] + w->fh[25]*w->S[84];
-    w->term[1][19] = w->term[1][19] + w->fh[26]*w->S[85];
-    w->term[1][20] = w->term[1][20] + w->fh[27]*w->S[86];
+    w->term[1][18] = w->term[1][18] + fh_pairs[50]*w->S[84];
+    w->term[1][19] = w->term[1][19] + fh_pairs[52]*w->S[85];
+    w->term[1][20] = w->term[1][20] + fh_pairs[54]*w->S[86];
     w->term[1][26] = w->term[1][26] + c_out;
-    w->term[1][30] = w->term[1][30] + w->fh[44]*w->S[84];
-    w->term[1][31] = w->term[1][31] + w->fh[45]*w->S[85];
-    w->term[1][32] = w->term[1][32] + w->fh[46]*w->S[86];
+    w->term[1][30] = w->term[1][30] + fh_pairs[88]*w->S[84];
+    w->term[1][31] = w->term[1][31] + fh_pairs[90]*w->S[85];
+    w->term[1][32] = w->term[1][32] + fh_pairs[92]*w->S[86];
     w->term[1][39] = w->term[1][39] + c_out;
-    w->term[1][45] = w->term[1][45] + w->fh[61]*w->S[87];
-    w->term[1][46] = w->term[1][46] + w->fh[62]*w->S[88];
-    w->term[1][47] = w->term[1][47] + w->fh[63]*w->S[89];
+    w->term[1][45] = w->term[1][45] + fh_pairs[122]*w->S[87];
+    w->term[1][46] = w->term[1][46] + fh_pairs[124]*w->S[88];
+    w->term[1][47] = w->term[1][47] + fh_pairs[126]*w->S[89];
     w->term[1][52] = w->term[1][52] + c_out;
-    w->term[1][57] = w->term[1][57] + w->fh[72]*w->S[87];
-    w->term[1][58] = w->term[1][58] + w->fh[73]*w->S[88];
-    w->term[1][59] = w->term[1][59] + w->fh[74]*w->S[89];
+    w->term[1][57] = w->term[1][57] + fh_pairs[144]*w->S[87];
+    w->term[1][58] = w->term[1][58] + fh_pairs[146]*w->S[88];
+    w->term[1][59] = w->term[1][59] + fh_pairs[148]*w->S[89];
     w->term[1][65] = w->term[1][65] + c_out;
-    w->term[1][84] = c_out + w->fh[81]*w->S[84];
-    w->term[1][85] = c_out + w->fh[82]*w->S[85];
-    w->term[1][86] = c_out + w->fh[83]*w->S[86];
-    w->term[1][87] = c_out + w->fh[84]*w->S[87];
-    w->term[1][88] = c_out + w->fh[85]*w->S[88];
-    w->term[1][89] = c_out + w->fh[86]*w->S[89];
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[162], fh_pairs[164]),
+                lane_pair_load(&w->S[84]));
+        lane_pair_store(&w->term[1][84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[166], fh_pairs[168]),
+                lane_pair_load(&w->S[86]));
+        lane_pair_store(&w->term[1][86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[170], fh_pairs[172]),
+                lane_pair_load(&w->S[88]));
+        lane_pair_store(&w->term[1][88], pair);
+    }
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void horner_first_into_term(ned_doppler32_augmented_discretize_scratch
         *restrict w, const ned_doppler32_augmented_scalar c_out)
 {
+    const ned_doppler32_augmented_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 12; ++k) {
-        w->term[1][k] = w->fh[0]*w->S[12+k] + w->fh[1]*w->S[24+k] + w->fh[2]*w->S[48+k] +
-                w->fh[3]*w->S[60+k];
-        w->term[1][12+k] = w->fh[19]*w->S[k] + w->fh[20]*w->S[24+k] + w->fh[21]*w->S[36+k];
-        w->term[1][24+k] = w->fh[37]*w->S[k] + w->fh[38]*w->S[12+k] + w->fh[39]*w->S[48+k] +
-                w->fh[40]*w->S[60+k];
-        w->term[1][36+k] = w->fh[56]*w->S[12+k] + w->fh[57]*w->S[24+k] + w->fh[58]*w->S[36+k] +
-                w->fh[59]*w->S[48+k] + w->fh[60]*w->S[60+k];
-        w->term[1][48+k] = w->fh[67]*w->S[k] + w->fh[68]*w->S[24+k] + w->fh[69]*w->S[36+k] +
-                w->fh[70]*w->S[48+k] + w->fh[71]*w->S[60+k];
-        w->term[1][60+k] = w->fh[78]*w->S[36+k];
-        w->term[1][72+k] = w->fh[79]*w->S[48+k] + w->fh[80]*w->S[60+k];
+    for (k = 0; k < 12; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->S[12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[60+k]));
+        lane_pair_store(&w->term[1][k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[36+k]));
+        lane_pair_store(&w->term[1][12+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[60+k]));
+        lane_pair_store(&w->term[1][24+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->S[12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[116]),
+                lane_pair_load(&w->S[36+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[118]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[120]),
+                lane_pair_load(&w->S[60+k]));
+        lane_pair_store(&w->term[1][36+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[134]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[136]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[138]),
+                lane_pair_load(&w->S[36+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[140]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[142]),
+                lane_pair_load(&w->S[60+k]));
+        lane_pair_store(&w->term[1][48+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[156]),
+                lane_pair_load(&w->S[36+k]));
+        lane_pair_store(&w->term[1][60+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[158]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[160]),
+                lane_pair_load(&w->S[60+k]));
+        lane_pair_store(&w->term[1][72+k], lanes);
     }
     w->term[1][0] = w->term[1][0] + c_out;
-    w->term[1][6] = w->term[1][6] + w->fh[7]*w->S[84];
-    w->term[1][7] = w->term[1][7] + w->fh[8]*w->S[85];
-    w->term[1][8] = w->term[1][8] + w->fh[9]*w->S[86];
+    w->term[1][6] = w->term[1][6] + fh_pairs[14]*w->S[84];
+    w->term[1][7] = w->term[1][7] + fh_pairs[16]*w->S[85];
+    w->term[1][8] = w->term[1][8] + fh_pairs[18]*w->S[86];
     w->term[1][13] = w->term[1][13] + c_out;
-    w->term[1][18] = w->term[1][18] + w->fh[25]*w->S[84];
-    w->term[1][19] = w->term[1][19] + w->fh[26]*w->S[85];
-    w->term[1][20] = w->term[1][20] + w->fh[27]*w->S[86];
+    w->term[1][18] = w->term[1][18] + fh_pairs[50]*w->S[84];
+    w->term[1][19] = w->term[1][19] + fh_pairs[52]*w->S[85];
+    w->term[1][20] = w->term[1][20] + fh_pairs[54]*w->S[86];
     w->term[1][26] = w->term[1][26] + c_out;
-    w->term[1][30] = w->term[1][30] + w->fh[44]*w->S[84];
-    w->term[1][31] = w->term[1][31] + w->fh[45]*w->S[85];
-    w->term[1][32] = w->term[1][32] + w->fh[46]*w->S[86];
+    w->term[1][30] = w->term[1][30] + fh_pairs[88]*w->S[84];
+    w->term[1][31] = w->term[1][31] + fh_pairs[90]*w->S[85];
+    w->term[1][32] = w->term[1][32] + fh_pairs[92]*w->S[86];
     w->term[1][39] = w->term[1][39] + c_out;
-    w->term[1][45] = w->term[1][45] + w->fh[61]*w->S[87];
-    w->term[1][46] = w->term[1][46] + w->fh[62]*w->S[88];
-    w->term[1][47] = w->term[1][47] + w->fh[63]*w->S[89];
+    w->term[1][45] = w->term[1][45] + fh_pairs[122]*w->S[87];
+    w->term[1][46] = w->term[1][46] + fh_pairs[124]*w->S[88];
+    w->term[1][47] = w->term[1][47] + fh_pairs[126]*w->S[89];
     w->term[1][52] = w->term[1][52] + c_out;
-    w->term[1][57] = w->term[1][57] + w->fh[72]*w->S[87];
-    w->term[1][58] = w->term[1][58] + w->fh[73]*w->S[88];
-    w->term[1][59] = w->term[1][59] + w->fh[74]*w->S[89];
+    w->term[1][57] = w->term[1][57] + fh_pairs[144]*w->S[87];
+    w->term[1][58] = w->term[1][58] + fh_pairs[146]*w->S[88];
+    w->term[1][59] = w->term[1][59] + fh_pairs[148]*w->S[89];
     w->term[1][65] = w->term[1][65] + c_out;
     w->term[1][180] = c_out;
-    w->term[1][84] = c_out + w->fh[81]*w->S[84];
-    w->term[1][85] = c_out + w->fh[82]*w->S[85];
-    w->term[1][86] = c_out + w->fh[83]*w->S[86];
-    w->term[1][87] = c_out + w->fh[84]*w->S[87];
-    w->term[1][88] = c_out + w->fh[85]*w->S[88];
-    w->term[1][89] = c_out + w->fh[86]*w->S[89];
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[162], fh_pairs[164]),
+                lane_pair_load(&w->S[84]));
+        lane_pair_store(&w->term[1][84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[166], fh_pairs[168]),
+                lane_pair_load(&w->S[86]));
+        lane_pair_store(&w->term[1][86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[170], fh_pairs[172]),
+                lane_pair_load(&w->S[88]));
+        lane_pair_store(&w->term[1][88], pair);
+    }
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void horner_last_into_S(ned_doppler32_augmented_discretize_scratch
         *restrict w, const ned_doppler32_augmented_scalar c_out)
 {
+    const ned_doppler32_augmented_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 12; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][12+k] + w->fh[1]*w->term[1][24+k] + w->fh[2]*w->term[1][48+k]
-                + w->fh[3]*w->term[1][60+k];
-        w->S[12+k] = w->fh[19]*w->term[1][k] + w->fh[20]*w->term[1][24+k] +
-                w->fh[21]*w->term[1][36+k];
-        w->S[24+k] = w->fh[37]*w->term[1][k] + w->fh[38]*w->term[1][12+k] +
-                w->fh[39]*w->term[1][48+k] + w->fh[40]*w->term[1][60+k];
-        w->S[36+k] = w->fh[56]*w->term[1][12+k] + w->fh[57]*w->term[1][24+k] +
-                w->fh[58]*w->term[1][36+k] + w->fh[59]*w->term[1][48+k] +
-                w->fh[60]*w->term[1][60+k];
-        w->S[48+k] = w->fh[67]*w->term[1][k] + w->fh[68]*w->term[1][24+k] +
-                w->fh[69]*w->term[1][36+k] + w->fh[70]*w->term[1][48+k] +
-                w->fh[71]*w->term[1][60+k];
-        w->S[60+k] = w->fh[78]*w->term[1][36+k];
-        w->S[72+k] = w->fh[79]*w->term[1][48+k] + w->fh[80]*w->term[1][60+k];
+    for (k = 0; k < 12; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->term[1][12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->term[1][60+k]));
+        lane_pair_store(&w->S[k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->term[1][36+k]));
+        lane_pair_store(&w->S[12+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->term[1][12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->term[1][60+k]));
+        lane_pair_store(&w->S[24+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->term[1][12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[116]),
+                lane_pair_load(&w->term[1][36+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[118]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[120]),
+                lane_pair_load(&w->term[1][60+k]));
+        lane_pair_store(&w->S[36+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[134]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[136]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[138]),
+                lane_pair_load(&w->term[1][36+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[140]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[142]),
+                lane_pair_load(&w->term[1][60+k]));
+        lane_pair_store(&w->S[48+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[156]),
+                lane_pair_load(&w->term[1][36+k]));
+        lane_pair_store(&w->S[60+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[158]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[160]),
+                lane_pair_load(&w->term[1][60+k]));
+        lane_pair_store(&w->S[72+k], lanes);
     }
     w->S[0] = w->S[0] + c_out;
-    w->S[6] = w->S[6] + w->fh[7]*w->term[1][84];
-    w->S[7] = w->S[7] + w->fh[8]*w->term[1][85];
-    w->S[8] = w->S[8] + w->fh[9]*w->term[1][86];
+    w->S[6] = w->S[6] + fh_pairs[14]*w->term[1][84];
+    w->S[7] = w->S[7] + fh_pairs[16]*w->term[1][85];
+    w->S[8] = w->S[8] + fh_pairs[18]*w->term[1][86];
     w->S[13] = w->S[13] + c_out;
-    w->S[18] = w->S[18] + w->fh[25]*w->term[1][84];
-    w->S[19] = w->S[19] + w->fh[26]*w->term[1][85];
-    w->S[20] = w->S[20] + w->fh[27]*w->term[1][86];
+    w->S[18] = w->S[18] + fh_pairs[50]*w->term[1][84];
+    w->S[19] = w->S[19] + fh_pairs[52]*w->term[1][85];
+    w->S[20] = w->S[20] + fh_pairs[54]*w->term[1][86];
     w->S[26] = w->S[26] + c_out;
-    w->S[30] = w->S[30] + w->fh[44]*w->term[1][84];
-    w->S[31] = w->S[31] + w->fh[45]*w->term[1][85];
-    w->S[32] = w->S[32] + w->fh[46]*w->term[1][86];
+    w->S[30] = w->S[30] + fh_pairs[88]*w->term[1][84];
+    w->S[31] = w->S[31] + fh_pairs[90]*w->term[1][85];
+    w->S[32] = w->S[32] + fh_pairs[92]*w->term[1][86];
     w->S[39] = w->S[39] + c_out;
-    w->S[45] = w->S[45] + w->fh[61]*w->term[1][87];
-    w->S[46] = w->S[46] + w->fh[62]*w->term[1][88];
-    w->S[47] = w->S[47] + w->fh[63]*w->term[1][89];
+    w->S[45] = w->S[45] + fh_pairs[122]*w->term[1][87];
+    w->S[46] = w->S[46] + fh_pairs[124]*w->term[1][88];
+    w->S[47] = w->S[47] + fh_pairs[126]*w->term[1][89];
     w->S[52] = w->S[52] + c_out;
-    w->S[57] = w->S[57] + w->fh[72]*w->term[1][87];
-    w->S[58] = w->S[58] + w->fh[73]*w->term[1][88];
-    w->S[59] = w->S[59] + w->fh[74]*w->term[1][89];
+    w->S[57] = w->S[57] + fh_pairs[144]*w->term[1][87];
+    w->S[58] = w->S[58] + fh_pairs[146]*w->term[1][88];
+    w->S[59] = w->S[59] + fh_pairs[148]*w->term[1][89];
     w->S[65] = w->S[65] + c_out;
     w->S[180] = c_out;
-    w->S[84] = c_out + w->fh[81]*w->term[1][84];
-    w->S[85] = c_out + w->fh[82]*w->term[1][85];
-    w->S[86] = c_out + w->fh[83]*w->term[1][86];
-    w->S[87] = c_out + w->fh[84]*w->term[1][87];
-    w->S[88] = c_out + w->fh[85]*w->term[1][88];
-    w->S[89] = c_out + w->fh[86]*w->term[1][89];
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[162], fh_pairs[164]),
+                lane_pair_load(&w->term[1][84]));
+        lane_pair_store(&w->S[84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[166], fh_pairs[168]),
+                lane_pair_load(&w->term[1][86]));
+        lane_pair_store(&w->S[86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[170], fh_pairs[172]),
+                lane_pair_load(&w->term[1][88]));
+        lane_pair_store(&w->S[88], pair);
+    }
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void horner_unit_columns(ned_doppler32_augmented_discretize_scratch
         *restrict w)
 {
+    const ned_doppler32_augmented_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
-                lane_pair_load(&w->fh[22]));
+                lane_pair_of(fh_pairs[44], fh_pairs[46]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
-                lane_pair_load(&w->fh[41]));
+                lane_pair_of(fh_pairs[82], fh_pairs[84]));
         lane_pair_store(&w->S[90], pair);
     }
-    w->S[92] = w->term[1][0]*w->fh[6] + w->term[1][1]*w->fh[24] + w->term[1][2]*w->fh[43];
+    w->S[92] = w->term[1][0]*fh_pairs[12] + w->term[1][1]*fh_pairs[48] + w->term[1][2]*fh_pairs[86];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
-                lane_pair_load(&w->fh[10]));
+                lane_pair_of(fh_pairs[20], fh_pairs[22]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
-                lane_pair_load(&w->fh[28]));
+                lane_pair_of(fh_pairs[56], fh_pairs[58]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
-                lane_pair_load(&w->fh[47]));
+                lane_pair_of(fh_pairs[94], fh_pairs[96]));
         lane_pair_store(&w->S[93], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&w->S[95], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
-                lane_pair_load(&w->fh[14]));
+                lane_pair_of(fh_pairs[28], fh_pairs[30]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
-                lane_pair_load(&w->fh[32]));
+                lane_pair_of(fh_pairs[64], fh_pairs[66]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
-                lane_pair_load(&w->fh[51]));
+                lane_pair_of(fh_pairs[102], fh_pairs[104]));
         lane_pair_store(&w->S[97], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
-                lane_pair_load(&w->fh[16]));
+                lane_pair_of(fh_pairs[32], fh_pairs[34]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
-                lane_pair_load(&w->fh[34]));
+                lane_pair_of(fh_pairs[68], fh_pairs[70]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
-                lane_pair_load(&w->fh[53]));
+                lane_pair_of(fh_pairs[106], fh_pairs[108]));
         lane_pair_store(&w->S[99], pair);
     }
-    w->S[101] = w->term[1][0]*w->fh[18] + w->term[1][1]*w->fh[36] + w->term[1][2]*w->fh[55];
+    w->S[101] = w->term[1][0]*fh_pairs[36] + w->term[1][1]*fh_pairs[72] +
+            w->term[1][2]*fh_pairs[110];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][3], w->term[1][3]),
-                lane_pair_load(&w->fh[64]));
+                lane_pair_of(fh_pairs[128], fh_pairs[130]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][4], w->term[1][4]),
-                lane_pair_load(&w->fh[75]));
+                lane_pair_of(fh_pairs[150], fh_pairs[152]));
         lane_pair_store(&w->S[102], pair);
     }
-    w->S[104] = w->term[1][3]*w->fh[66] + w->term[1][4]*w->fh[77];
+    w->S[104] = w->term[1][3]*fh_pairs[132] + w->term[1][4]*fh_pairs[154];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][12], w->term[1][12]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
-                lane_pair_load(&w->fh[22]));
+                lane_pair_of(fh_pairs[44], fh_pairs[46]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][14], w->term[1][14]),
-                lane_pair_load(&w->fh[41]));
+                lane_pair_of(fh_pairs[82], fh_pairs[84]));
         lane_pair_store(&w->S[105], pair);
     }
-    w->S[107] = w->term[1][12]*w->fh[6] + w->term[1][13]*w->fh[24] + w->term[1][14]*w->fh[43];
+    w->S[107] = w->term[1][12]*fh_pairs[12] + w->term[1][13]*fh_pairs[48] +
+            w->term[1][14]*fh_pairs[86];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][12], w->term[1][12]),
-                lane_pair_load(&w->fh[10]));
+                lane_pair_of(fh_pairs[20], fh_pairs[22]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
-                lane_pair_load(&w->fh[28]));
+                lane_pair_of(fh_pairs[56], fh_pairs[58]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][14], w->term[1][14]),
-                lane_pair_load(&w->fh[47]));
+                lane_pair_of(fh_pairs[94], fh_pairs[96]));
         lane_pair_store(&w->S[108], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][12], w->term[1][12]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][14], w->term[1][14]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&w->S[110], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][12], w->term[1][12]),
-                lane_pair_load(&w->fh[14]));
+                lane_pair_of(fh_pairs[28], fh_pairs[30]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
-                lane_pair_load(&w->fh[32]));
+                lane_pair_of(fh_pairs[64], fh_pairs[66]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][14], w->term[1][14]),
-                lane_pair_load(&w->fh[51]));
+                lane_pair_of(fh_pairs[102], fh_pairs[104]));
         lane_pair_store(&w->S[112], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][12], w->term[1][12]),
-                lane_pair_load(&w->fh[16]));
+                lane_pair_of(fh_pairs[32], fh_pairs[34]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
-                lane_pair_load(&w->fh[34]));
+                lane_pair_of(fh_pairs[68], fh_pairs[70]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][14], w->term[1][14]),
-                lane_pair_load(&w->fh[53]));
+                lane_pair_of(fh_pairs[106], fh_pairs[108]));
         lane_pair_store(&w->S[114], pair);
     }
-    w->S[116] = w->term[1][12]*w->fh[18] + w->term[1][13]*w->fh[36] + w->term[1][14]*w->fh[55];
+    w->S[116] = w->term[1][12]*fh_pairs[36] + w->term[1][13]*fh_pairs[72] +
+            w->term[1][14]*fh_pairs[110];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][15], w->term[1][15]),
-                lane_pair_load(&w->fh[64]));
+                lane_pair_of(fh_pairs[128], fh_pairs[130]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][16], w->term[1][16]),
-                lane_pair_load(&w->fh[75]));
+                lane_pair_of(fh_pairs[150], fh_pairs[152]));
         lane_pair_store(&w->S[117], pair);
     }
-    w->S[119] = w->term[1][15]*w->fh[66] + w->term[1][16]*w->fh[77];
+    w->S[119] = w->term[1][15]*fh_pairs[132] + w->term[1][16]*fh_pairs[154];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
-                lane_pair_load(&w->fh[22]));
+                lane_pair_of(fh_pairs[44], fh_pairs[46]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
-                lane_pair_load(&w->fh[41]));
+                lane_pair_of(fh_pairs[82], fh_pairs[84]));
         lane_pair_store(&w->S[120], pair);
     }
-    w->S[122] = w->term[1][24]*w->fh[6] + w->term[1][25]*w->fh[24] + w->term[1][26]*w->fh[43];
+    w->S[122] = w->term[1][24]*fh_pairs[12] + w->term[1][25]*fh_pairs[48] +
+            w->term[1][26]*fh_pairs[86];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
-                lane_pair_load(&w->fh[10]));
+                lane_pair_of(fh_pairs[20], fh_pairs[22]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
-                lane_pair_load(&w->fh[28]));
+                lane_pair_of(fh_pairs[56], fh_pairs[58]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
-                lane_pair_load(&w->fh[47]));
+                lane_pair_of(fh_pairs[94], fh_pairs[96]));
         lane_pair_store(&w->S[123], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&w->S[125], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
-                lane_pair_load(&w->fh[14]));
+                lane_pair_of(fh_pairs[28], fh_pairs[30]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
-                lane_pair_load(&w->fh[32]));
+                lane_pair_of(fh_pairs[64], fh_pairs[66]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
-                lane_pair_load(&w->fh[51]));
+                lane_pair_of(fh_pairs[102], fh_pairs[104]));
         lane_pair_store(&w->S[127], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
-                lane_pair_load(&w->fh[16]));
+                lane_pair_of(fh_pairs[32], fh_pairs[34]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
-                lane_pair_load(&w->fh[34]));
+                lane_pair_of(fh_pairs[68], fh_pairs[70]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
-                lane_pair_load(&w->fh[53]));
+                lane_pair_of(fh_pairs[106], fh_pairs[108]));
         lane_pair_store(&w->S[129], pair);
     }
-    w->S[131] = w->term[1][24]*w->fh[18] + w->term[1][25]*w->fh[36] + w->term[1][26]*w->fh[55];
+    w->S[131] = w->term[1][24]*fh_pairs[36] + w->term[1][25]*fh_pairs[72] +
+            w->term[1][26]*fh_pairs[110];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][27], w->term[1][27]),
-                lane_pair_load(&w->fh[64]));
+                lane_pair_of(fh_pairs[128], fh_pairs[130]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][28], w->term[1][28]),
-                lane_pair_load(&w->fh[75]));
+                lane_pair_of(fh_pairs[150], fh_pairs[152]));
         lane_pair_store(&w->S[132], pair);
     }
-    w->S[134] = w->term[1][27]*w->fh[66] + w->term[1][28]*w->fh[77];
+    w->S[134] = w->term[1][27]*fh_pairs[132] + w->term[1][28]*fh_pairs[154];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][36], w->term[1][36]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
-                lane_pair_load(&w->fh[22]));
+                lane_pair_of(fh_pairs[44], fh_pairs[46]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][38], w->term[1][38]),
-                lane_pair_load(&w->fh[41]));
+                lane_pair_of(fh_pairs[82], fh_pairs[84]));
         lane_pair_store(&w->S[135], pair);
     }
-    w->S[137] = w->term[1][36]*w->fh[6] + w->term[1][37]*w->fh[24] + w->term[1][38]*w->fh[43];
+    w->S[137] = w->term[1][36]*fh_pairs[12] + w->term[1][37]*fh_pairs[48] +
+            w->term[1][38]*fh_pairs[86];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][36], w->term[1][36]),
-                lane_pair_load(&w->fh[10]));
+                lane_pair_of(fh_pairs[20], fh_pairs[22]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
-                lane_pair_load(&w->fh[28]));
+                lane_pair_of(fh_pairs[56], fh_pairs[58]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][38], w->term[1][38]),
-                lane_pair_load(&w->fh[47]));
+                lane_pair_of(fh_pairs[94], fh_pairs[96]));
         lane_pair_store(&w->S[138], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][36], w->term[1][36]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][38], w->term[1][38]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&w->S[140], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][36], w->term[1][36]),
-                lane_pair_load(&w->fh[14]));
+                lane_pair_of(fh_pairs[28], fh_pairs[30]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
-                lane_pair_load(&w->fh[32]));
+                lane_pair_of(fh_pairs[64], fh_pairs[66]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][38], w->term[1][38]),
-                lane_pair_load(&w->fh[51]));
+                lane_pair_of(fh_pairs[102], fh_pairs[104]));
         lane_pair_store(&w->S[142], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][36], w->term[1][36]),
-                lane_pair_load(&w->fh[16]));
+                lane_pair_of(fh_pairs[32], fh_pairs[34]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
-                lane_pair_load(&w->fh[34]));
+                lane_pair_of(fh_pairs[68], fh_pairs[70]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][38], w->term[1][38]),
-                lane_pair_load(&w->fh[53]));
+                lane_pair_of(fh_pairs[106], fh_pairs[108]));
         lane_pair_store(&w->S[144], pair);
     }
-    w->S[146] = w->term[1][36]*w->fh[18] + w->term[1][37]*w->fh[36] + w->term[1][38]*w->fh[55];
+    w->S[146] = w->term[1][36]*fh_pairs[36] + w->term[1][37]*fh_pairs[72] +
+            w->term[1][38]*fh_pairs[110];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][39], w->term[1][39]),
-                lane_pair_load(&w->fh[64]));
+                lane_pair_of(fh_pairs[128], fh_pairs[130]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][40], w->term[1][40]),
-                lane_pair_load(&w->fh[75]));
+                lane_pair_of(fh_pairs[150], fh_pairs[152]));
         lane_pair_store(&w->S[147], pair);
     }
-    w->S[149] = w->term[1][39]*w->fh[66] + w->term[1][40]*w->fh[77];
+    w->S[149] = w->term[1][39]*fh_pairs[132] + w->term[1][40]*fh_pairs[154];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
-                lane_pair_load(&w->fh[22]));
+                lane_pair_of(fh_pairs[44], fh_pairs[46]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
-                lane_pair_load(&w->fh[41]));
+                lane_pair_of(fh_pairs[82], fh_pairs[84]));
         lane_pair_store(&w->S[150], pair);
     }
-    w->S[152] = w->term[1][48]*w->fh[6] + w->term[1][49]*w->fh[24] + w->term[1][50]*w->fh[43];
+    w->S[152] = w->term[1][48]*fh_pairs[12] + w->term[1][49]*fh_pairs[48] +
+            w->term[1][50]*fh_pairs[86];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
-                lane_pair_load(&w->fh[10]));
+                lane_pair_of(fh_pairs[20], fh_pairs[22]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
-                lane_pair_load(&w->fh[28]));
+                lane_pair_of(fh_pairs[56], fh_pairs[58]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
-                lane_pair_load(&w->fh[47]));
+                lane_pair_of(fh_pairs[94], fh_pairs[96]));
         lane_pair_store(&w->S[153], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&w->S[155], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
-                lane_pair_load(&w->fh[14]));
+                lane_pair_of(fh_pairs[28], fh_pairs[30]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
-                lane_pair_load(&w->fh[32]));
+                lane_pair_of(fh_pairs[64], fh_pairs[66]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
-                lane_pair_load(&w->fh[51]));
+                lane_pair_of(fh_pairs[102], fh_pairs[104]));
         lane_pair_store(&w->S[157], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
-                lane_pair_load(&w->fh[16]));
+                lane_pair_of(fh_pairs[32], fh_pairs[34]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
-                lane_pair_load(&w->fh[34]));
+                lane_pair_of(fh_pairs[68], fh_pairs[70]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
-                lane_pair_load(&w->fh[53]));
+                lane_pair_of(fh_pairs[106], fh_pairs[108]));
         lane_pair_store(&w->S[159], pair);
     }
-    w->S[161] = w->term[1][48]*w->fh[18] + w->term[1][49]*w->fh[36] + w->term[1][50]*w->fh[55];
+    w->S[161] = w->term[1][48]*fh_pairs[36] + w->term[1][49]*fh_pairs[72] +
+            w->term[1][50]*fh_pairs[110];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][51], w->term[1][51]),
-                lane_pair_load(&w->fh[64]));
+                lane_pair_of(fh_pairs[128], fh_pairs[130]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][52], w->term[1][52]),
-                lane_pair_load(&w->fh[75]));
+                lane_pair_of(fh_pairs[150], fh_pairs[152]));
         lane_pair_store(&w->S[162], pair);
     }
-    w->S[164] = w->term[1][51]*w->fh[66] + w->term[1][52]*w->fh[77];
+    w->S[164] = w->term[1][51]*fh_pairs[132] + w->term[1][52]*fh_pairs[154];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][60], w->term[1][60]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
-                lane_pair_load(&w->fh[22]));
+                lane_pair_of(fh_pairs[44], fh_pairs[46]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][62], w->term[1][62]),
-                lane_pair_load(&w->fh[41]));
+                lane_pair_of(fh_pairs[82], fh_pairs[84]));
         lane_pair_store(&w->S[165], pair);
     }
-    w->S[167] = w->term[1][60]*w->fh[6] + w->term[1][61]*w->fh[24] + w->term[1][62]*w->fh[43];
+    w->S[167] = w->term[1][60]*fh_pairs[12] + w->term[1][61]*fh_pairs[48] +
+            w->term[1][62]*fh_pairs[86];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][60], w->term[1][60]),
-                lane_pair_load(&w->fh[10]));
+                lane_pair_of(fh_pairs[20], fh_pairs[22]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
-                lane_pair_load(&w->fh[28]));
+                lane_pair_of(fh_pairs[56], fh_pairs[58]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][62], w->term[1][62]),
-                lane_pair_load(&w->fh[47]));
+                lane_pair_of(fh_pairs[94], fh_pairs[96]));
         lane_pair_store(&w->S[168], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][60], w->term[1][60]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][62], w->term[1][62]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&w->S[170], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][60], w->term[1][60]),
-                lane_pair_load(&w->fh[14]));
+                lane_pair_of(fh_pairs[28], fh_pairs[30]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
-                lane_pair_load(&w->fh[32]));
+                lane_pair_of(fh_pairs[64], fh_pairs[66]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][62], w->term[1][62]),
-                lane_pair_load(&w->fh[51]));
+                lane_pair_of(fh_pairs[102], fh_pairs[104]));
         lane_pair_store(&w->S[172], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][60], w->term[1][60]),
-                lane_pair_load(&w->fh[16]));
+                lane_pair_of(fh_pairs[32], fh_pairs[34]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
-                lane_pair_load(&w->fh[34]));
+                lane_pair_of(fh_pairs[68], fh_pairs[70]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][62], w->term[1][62]),
-                lane_pair_load(&w->fh[53]));
+                lane_pair_of(fh_pairs[106], fh_pairs[108]));
         lane_pair_store(&w->S[174], pair);
     }
-    w->S[176] = w->term[1][60]*w->fh[18] + w->term[1][61]*w->fh[36] + w->term[1][62]*w->fh[55];
+    w->S[176] = w->term[1][60]*fh_pairs[36] + w->term[1][61]*fh_pairs[72] +
+            w->term[1][62]*fh_pairs[110];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][63], w->term[1][63]),
-                lane_pair_load(&w->fh[64]));
+                lane_pair_of(fh_pairs[128], fh_pairs[130]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][64], w->term[1][64]),
-                lane_pair_load(&w->fh[75]));
+                lane_pair_of(fh_pairs[150], fh_pairs[152]));
         lane_pair_store(&w->S[177], pair);
     }
-    w->S[179] = w->term[1][63]*w->fh[66] + w->term[1][64]*w->fh[77];
+    w->S[179] = w->term[1][63]*fh_pairs[132] + w->term[1][64]*fh_pairs[154];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][72], w->term[1][72]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][73], w->term[1][73]),
-                lane_pair_load(&w->fh[22]));
+                lane_pair_of(fh_pairs[44], fh_pairs[46]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][74], w->term[1][74]),
-                lane_pair_load(&w->fh[41]));
+                lane_pair_of(fh_pairs[82], fh_pairs[84]));
         lane_pair_store(&w->S[181], pair);
     }
-    w->S[183] = w->term[1][72]*w->fh[6] + w->term[1][73]*w->fh[24] + w->term[1][74]*w->fh[43];
+    w->S[183] = w->term[1][72]*fh_pairs[12] + w->term[1][73]*fh_pairs[48] +
+            w->term[1][74]*fh_pairs[86];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][72], w->term[1][72]),
-                lane_pair_load(&w->fh[10]));
+                lane_pair_of(fh_pairs[20], fh_pairs[22]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][73], w->term[1][73]),
-                lane_pair_load(&w->fh[28]));
+                lane_pair_of(fh_pairs[56], fh_pairs[58]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][74], w->term[1][74]),
-                lane_pair_load(&w->fh[47]));
+                lane_pair_of(fh_pairs[94], fh_pairs[96]));
         lane_pair_store(&w->S[184], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][72], w->term[1][72]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][73], w->term[1][73]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][74], w->term[1][74]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&w->S[186], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][72], w->term[1][72]),
-                lane_pair_load(&w->fh[14]));
+                lane_pair_of(fh_pairs[28], fh_pairs[30]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][73], w->term[1][73]),
-                lane_pair_load(&w->fh[32]));
+                lane_pair_of(fh_pairs[64], fh_pairs[66]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][74], w->term[1][74]),
-                lane_pair_load(&w->fh[51]));
+                lane_pair_of(fh_pairs[102], fh_pairs[104]));
         lane_pair_store(&w->S[188], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][72], w->term[1][72]),
-                lane_pair_load(&w->fh[16]));
+                lane_pair_of(fh_pairs[32], fh_pairs[34]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][73], w->term[1][73]),
-                lane_pair_load(&w->fh[34]));
+                lane_pair_of(fh_pairs[68], fh_pairs[70]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][74], w->term[1][74]),
-                lane_pair_load(&w->fh[53]));
+                lane_pair_of(fh_pairs[106], fh_pairs[108]));
         lane_pair_store(&w->S[190], pair);
     }
-    w->S[192] = w->term[1][72]*w->fh[18] + w->term[1][73]*w->fh[36] + w->term[1][74]*w->fh[55];
+    w->S[192] = w->term[1][72]*fh_pairs[36] + w->term[1][73]*fh_pairs[72] +
+            w->term[1][74]*fh_pairs[110];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][75], w->term[1][75]),
-                lane_pair_load(&w->fh[64]));
+                lane_pair_of(fh_pairs[128], fh_pairs[130]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][76], w->term[1][76]),
-                lane_pair_load(&w->fh[75]));
+                lane_pair_of(fh_pairs[150], fh_pairs[152]));
         lane_pair_store(&w->S[193], pair);
     }
-    w->S[195] = w->term[1][75]*w->fh[66] + w->term[1][76]*w->fh[77];
+    w->S[195] = w->term[1][75]*fh_pairs[132] + w->term[1][76]*fh_pairs[154];
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void horner_transition(ned_doppler32_augmented_transition *restrict t,
         const ned_doppler32_augmented_discretize_scratch *restrict w)
 {
     const ned_doppler32_augmented_scalar one = 1.0;
-    int k;
-    for (k = 0; k < 6; ++k) {
-        t->Phi[k] = w->fh[0]*w->S[12+k] + w->fh[1]*w->S[24+k] + w->fh[2]*w->S[48+k] +
-                w->fh[3]*w->S[60+k];
-        t->Phi[9+k] = w->fh[0]*w->S[18+k] + w->fh[1]*w->S[30+k] + w->fh[2]*w->S[54+k] +
-                w->fh[3]*w->S[66+k];
-        t->Phi[27+k] = w->fh[19]*w->S[k] + w->fh[20]*w->S[24+k] + w->fh[21]*w->S[36+k];
-        t->Phi[36+k] = w->fh[19]*w->S[6+k] + w->fh[20]*w->S[30+k] + w->fh[21]*w->S[42+k];
-        t->Phi[54+k] = w->fh[37]*w->S[k] + w->fh[38]*w->S[12+k] + w->fh[39]*w->S[48+k] +
-                w->fh[40]*w->S[60+k];
-        t->Phi[63+k] = w->fh[37]*w->S[6+k] + w->fh[38]*w->S[18+k] + w->fh[39]*w->S[54+k] +
-                w->fh[40]*w->S[66+k];
-        t->Phi[81+k] = w->fh[56]*w->S[12+k] + w->fh[57]*w->S[24+k] + w->fh[58]*w->S[36+k] +
-                w->fh[59]*w->S[48+k] + w->fh[60]*w->S[60+k];
-        t->Phi[90+k] = w->fh[56]*w->S[18+k] + w->fh[57]*w->S[30+k] + w->fh[58]*w->S[42+k] +
-                w->fh[59]*w->S[54+k] + w->fh[60]*w->S[66+k];
-        t->Phi[108+k] = w->fh[67]*w->S[k] + w->fh[68]*w->S[24+k] + w->fh[69]*w->S[36+k] +
-                w->fh[70]*w->S[48+k] + w->fh[71]*w->S[60+k];
-        t->Phi[117+k] = w->fh[67]*w->S[6+k] + w->fh[68]*w->S[30+k] + w->fh[69]*w->S[42+k] +
-                w->fh[70]*w->S[54+k] + w->fh[71]*w->S[66+k];
-        t->Phi[135+k] = w->fh[78]*w->S[36+k];
-        t->Phi[144+k] = w->fh[78]*w->S[42+k];
-        t->Phi[162+k] = w->fh[79]*w->S[48+k] + w->fh[80]*w->S[60+k];
-        t->Phi[172+k] = w->fh[79]*w->S[54+k] + w->fh[80]*w->S[66+k];
-    }
-    t->Phi[9] = t->Phi[9] + w->fh[7]*w->S[84];
-    t->Phi[10] = t->Phi[10] + w->fh[8]*w->S[85];
-    t->Phi[11] = t->Phi[11] + w->fh[9]*w->S[86];
-    t->Phi[36] = t->Phi[36] + w->fh[25]*w->S[84];
-    t->Phi[37] = t->Phi[37] + w->fh[26]*w->S[85];
-    t->Phi[38] = t->Phi[38] + w->fh[27]*w->S[86];
-    t->Phi[63] = t->Phi[63] + w->fh[44]*w->S[84];
-    t->Phi[64] = t->Phi[64] + w->fh[45]*w->S[85];
-    t->Phi[65] = t->Phi[65] + w->fh[46]*w->S[86];
-    t->Phi[93] = t->Phi[93] + w->fh[61]*w->S[87];
-    t->Phi[94] = t->Phi[94] + w->fh[62]*w->S[88];
-    t->Phi[95] = t->Phi[95] + w->fh[63]*w->S[89];
-    t->Phi[120] = t->Phi[120] + w->fh[72]*w->S[87];
-    t->Phi[121] = t->Phi[121] + w->fh[73]*w->S[88];
-    t->Phi[122] = t->Phi[122] + w->fh[74]*w->S[89];
-    t->Phi[193] = w->fh[81]*w->S[84];
-    t->Phi[194] = w->fh[82]*w->S[85];
-    t->Phi[195] = w->fh[83]*w->S[86];
-    t->Phi[196] = w->fh[84]*w->S[87];
-    t->Phi[197] = w->fh[85]*w->S[88];
-    t->Phi[198] = w->fh[86]*w->S[89];
+    const ned_doppler32_augmented_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     {
-        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
-                lane_pair_load(&w->fh[4]));
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[12]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[24]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[48]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[60]));
+        lane_pair_store(&t->Phi[0], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[18]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[30]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[9], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[0]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[24]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[36]));
+        lane_pair_store(&t->Phi[27], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[6]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[30]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[42]));
+        lane_pair_store(&t->Phi[36], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[0]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[12]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[48]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[60]));
+        lane_pair_store(&t->Phi[54], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[6]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[18]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[63], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->S[12]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[24]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[116]),
+                lane_pair_load(&w->S[36]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[118]),
+                lane_pair_load(&w->S[48]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[120]),
+                lane_pair_load(&w->S[60]));
+        lane_pair_store(&t->Phi[81], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->S[18]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[30]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[116]),
+                lane_pair_load(&w->S[42]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[118]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[120]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[90], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[134]), lane_pair_load(&w->S[0]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[136]),
+                lane_pair_load(&w->S[24]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[138]),
+                lane_pair_load(&w->S[36]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[140]),
+                lane_pair_load(&w->S[48]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[142]),
+                lane_pair_load(&w->S[60]));
+        lane_pair_store(&t->Phi[108], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[134]), lane_pair_load(&w->S[6]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[136]),
+                lane_pair_load(&w->S[30]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[138]),
+                lane_pair_load(&w->S[42]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[140]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[142]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[117], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[156]),
+                lane_pair_load(&w->S[36]));
+        lane_pair_store(&t->Phi[135], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[156]),
+                lane_pair_load(&w->S[42]));
+        lane_pair_store(&t->Phi[144], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[158]),
+                lane_pair_load(&w->S[48]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[160]),
+                lane_pair_load(&w->S[60]));
+        lane_pair_store(&t->Phi[162], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[158]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[160]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[172], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[14]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[62]));
+        lane_pair_store(&t->Phi[2], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[20]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[56]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[11], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[2]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[38]));
+        lane_pair_store(&t->Phi[29], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[8]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[44]));
+        lane_pair_store(&t->Phi[38], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[2]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[14]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[62]));
+        lane_pair_store(&t->Phi[56], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[8]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[20]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[56]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[65], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->S[14]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[116]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[118]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[120]),
+                lane_pair_load(&w->S[62]));
+        lane_pair_store(&t->Phi[83], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->S[20]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[116]),
+                lane_pair_load(&w->S[44]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[118]),
+                lane_pair_load(&w->S[56]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[120]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[92], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[134]), lane_pair_load(&w->S[2]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[136]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[138]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[140]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[142]),
+                lane_pair_load(&w->S[62]));
+        lane_pair_store(&t->Phi[110], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[134]), lane_pair_load(&w->S[8]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[136]),
+                lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[138]),
+                lane_pair_load(&w->S[44]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[140]),
+                lane_pair_load(&w->S[56]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[142]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[119], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[156]),
+                lane_pair_load(&w->S[38]));
+        lane_pair_store(&t->Phi[137], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[156]),
+                lane_pair_load(&w->S[44]));
+        lane_pair_store(&t->Phi[146], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[158]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[160]),
+                lane_pair_load(&w->S[62]));
+        lane_pair_store(&t->Phi[164], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[158]),
+                lane_pair_load(&w->S[56]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[160]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[174], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[16]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[28]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[4], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[34]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[58]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[13], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[4]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[28]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[40]));
+        lane_pair_store(&t->Phi[31], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[34]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[46]));
+        lane_pair_store(&t->Phi[40], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[4]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[16]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[58], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[58]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[67], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->S[16]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[28]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[116]),
+                lane_pair_load(&w->S[40]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[118]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[120]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[85], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[112]),
+                lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[114]),
+                lane_pair_load(&w->S[34]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[116]),
+                lane_pair_load(&w->S[46]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[118]),
+                lane_pair_load(&w->S[58]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[120]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[94], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[134]), lane_pair_load(&w->S[4]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[136]),
+                lane_pair_load(&w->S[28]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[138]),
+                lane_pair_load(&w->S[40]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[140]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[142]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[112], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[134]),
+                lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[136]),
+                lane_pair_load(&w->S[34]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[138]),
+                lane_pair_load(&w->S[46]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[140]),
+                lane_pair_load(&w->S[58]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[142]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[121], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[156]),
+                lane_pair_load(&w->S[40]));
+        lane_pair_store(&t->Phi[139], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[156]),
+                lane_pair_load(&w->S[46]));
+        lane_pair_store(&t->Phi[148], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[158]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[160]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[166], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[158]),
+                lane_pair_load(&w->S[58]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[160]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[176], lanes);
+    }
+    t->Phi[9] = t->Phi[9] + fh_pairs[14]*w->S[84];
+    t->Phi[10] = t->Phi[10] + fh_pairs[16]*w->S[85];
+    t->Phi[11] = t->Phi[11] + fh_pairs[18]*w->S[86];
+    t->Phi[36] = t->Phi[36] + fh_pairs[50]*w->S[84];
+    t->Phi[37] = t->Phi[37] + fh_pairs[52]*w->S[85];
+    t->Phi[38] = t->Phi[38] + fh_pairs[54]*w->S[86];
+    t->Phi[63] = t->Phi[63] + fh_pairs[88]*w->S[84];
+    t->Phi[64] = t->Phi[64] + fh_pairs[90]*w->S[85];
+    t->Phi[65] = t->Phi[65] + fh_pairs[92]*w->S[86];
+    t->Phi[93] = t->Phi[93] + fh_pairs[122]*w->S[87];
+    t->Phi[94] = t->Phi[94] + fh_pairs[124]*w->S[88];
+    t->Phi[95] = t->Phi[95] + fh_pairs[126]*w->S[89];
+    t->Phi[120] = t->Phi[120] + fh_pairs[144]*w->S[87];
+    t->Phi[121] = t->Phi[121] + fh_pairs[146]*w->S[88];
+    t->Phi[122] = t->Phi[122] + fh_pairs[148]*w->S[89];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[162], fh_pairs[164]),
+                lane_pair_load(&w->S[84]));
+        lane_pair_store(&t->Phi[193], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[166], fh_pairs[168]),
+                lane_pair_load(&w->S[86]));
+        lane_pair_store(&t->Phi[195], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[170], fh_pairs[172]),
+                lane_pair_load(&w->S[88]));
+        lane_pair_store(&t->Phi[197], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]), lane_pair_of(fh_pairs[8],
+                fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
-                lane_pair_load(&w->fh[22]));
+                lane_pair_of(fh_pairs[44], fh_pairs[46]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
-                lane_pair_load(&w->fh[41]));
+                lane_pair_of(fh_pairs[82], fh_pairs[84]));
         lane_pair_store(&t->Phi[6], pair);
     }
-    t->Phi[8] = w->S[0]*w->fh[6] + w->S[1]*w->fh[24] + w->S[2]*w->fh[43];
+    t->Phi[8] = w->S[0]*fh_pairs[12] + w->S[1]*fh_pairs[48] + w->S[2]*fh_pairs[86];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
-                lane_pair_load(&w->fh[10]));
+                lane_pair_of(fh_pairs[20], fh_pairs[22]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
-                lane_pair_load(&w->fh[28]));
+                lane_pair_of(fh_pairs[56], fh_pairs[58]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
-                lane_pair_load(&w->fh[47]));
+                lane_pair_of(fh_pairs[94], fh_pairs[96]));
         lane_pair_store(&t->Phi[15], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&t->Phi[17], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
-                lane_pair_load(&w->fh[14]));
+                lane_pair_of(fh_pairs[28], fh_pairs[30]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
-                lane_pair_load(&w->fh[32]));
+                lane_pair_of(fh_pairs[64], fh_pairs[66]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
-                lane_pair_load(&w->fh[51]));
+                lane_pair_of(fh_pairs[102], fh_pairs[104]));
         lane_pair_store(&t->Phi[19], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
-                lane_pair_load(&w->fh[16]));
+                lane_pair_of(fh_pairs[32], fh_pairs[34]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
-                lane_pair_load(&w->fh[34]));
+                lane_pair_of(fh_pairs[68], fh_pairs[70]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
-                lane_pair_load(&w->fh[53]));
+                lane_pair_of(fh_pairs[106], fh_pairs[108]));
         lane_pair_store(&t->Phi[21], pair);
     }
-    t->Phi[23] = w->S[0]*w->fh[18] + w->S[1]*w->fh[36] + w->S[2]*w->fh[55];
+    t->Phi[23] = w->S[0]*fh_pairs[36] + w->S[1]*fh_pairs[72] + w->S[2]*fh_pairs[110];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[3], w->S[3]),
-                lane_pair_load(&w->fh[64]));
+                lane_pair_of(fh_pairs[128], fh_pairs[130]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[4], w->S[4]),
-                lane_pair_load(&w->fh[75]));
+                lane_pair_of(fh_pairs[150], fh_pairs[152]));
         lane_pair_store(&t->Phi[24], pair);
     }
-    t->Phi[26] = w->S[3]*w->fh[66] + w->S[4]*w->fh[77];
+    t->Phi[26] = w->S[3]*fh_pairs[132] + w->S[4]*fh_pairs[154];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[12], w->S[12]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
-                lane_pair_load(&w->fh[22]));
+                lane_pair_of(fh_pairs[44], fh_pairs[46]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[14], w->S[14]),
-                lane_pair_load(&w->fh[41]));
+                lane_pair_of(fh_pairs[82], fh_pairs[84]));
         lane_pair_store(&t->Phi[33], pair);
     }
-    t->Phi[35] = w->S[12]*w->fh[6] + w->S[13]*w->fh[24] + w->S[14]*w->fh[43];
+    t->Phi[35] = w->S[12]*fh_pairs[12] + w->S[13]*fh_pairs[48] + w->S[14]*fh_pairs[86];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[12], w->S[12]),
-                lane_pair_load(&w->fh[10]));
+                lane_pair_of(fh_pairs[20], fh_pairs[22]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
-                lane_pair_load(&w->fh[28]));
+                lane_pair_of(fh_pairs[56], fh_pairs[58]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[14], w->S[14]),
-                lane_pair_load(&w->fh[47]));
+                lane_pair_of(fh_pairs[94], fh_pairs[96]));
         lane_pair_store(&t->Phi[42], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[12], w->S[12]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[14], w->S[14]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&t->Phi[44], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[12], w->S[12]),
-                lane_pair_load(&w->fh[14]));
+                lane_pair_of(fh_pairs[28], fh_pairs[30]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
-                lane_pair_load(&w->fh[32]));
+                lane_pair_of(fh_pairs[64], fh_pairs[66]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[14], w->S[14]),
-                lane_pair_load(&w->fh[51]));
+                lane_pair_of(fh_pairs[102], fh_pairs[104]));
         lane_pair_store(&t->Phi[46], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[12], w->S[12]),
-                lane_pair_load(&w->fh[16]));
+                lane_pair_of(fh_pairs[32], fh_pairs[34]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
-                lane_pair_load(&w->fh[34]));
+                lane_pair_of(fh_pairs[68], fh_pairs[70]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[14], w->S[14]),
-                lane_pair_load(&w->fh[53]));
+                lane_pair_of(fh_pairs[106], fh_pairs[108]));
         lane_pair_store(&t->Phi[48], pair);
     }
-    t->Phi[50] = w->S[12]*w->fh[18] + w->S[13]*w->fh[36] + w->S[14]*w->fh[55];
+    t->Phi[50] = w->S[12]*fh_pairs[36] + w->S[13]*fh_pairs[72] + w->S[14]*fh_pairs[110];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[15], w->S[15]),
-                lane_pair_load(&w->fh[64]));
+                lane_pair_of(fh_pairs[128], fh_pairs[130]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[16], w->S[16]),
-                lane_pair_load(&w->fh[75]));
+                lane_pair_of(fh_pairs[150], fh_pairs[152]));
         lane_pair_store(&t->Phi[51], pair);
     }
-    t->Phi[53] = w->S[15]*w->fh[66] + w->S[16]*w->fh[77];
+    t->Phi[53] = w->S[15]*fh_pairs[132] + w->S[16]*fh_pairs[154];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
-                lane_pair_load(&w->fh[22]));
+                lane_pair_of(fh_pairs[44], fh_pairs[46]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
-                lane_pair_load(&w->fh[41]));
+                lane_pair_of(fh_pairs[82], fh_pairs[84]));
         lane_pair_store(&t->Phi[60], pair);
     }
-    t->Phi[62] = w->S[24]*w->fh[6] + w->S[25]*w->fh[24] + w->S[26]*w->fh[43];
+    t->Phi[62] = w->S[24]*fh_pairs[12] + w->S[25]*fh_pairs[48] + w->S[26]*fh_pairs[86];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
-                lane_pair_load(&w->fh[10]));
+                lane_pair_of(fh_pairs[20], fh_pairs[22]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
-                lane_pair_load(&w->fh[28]));
+                lane_pair_of(fh_pairs[56], fh_pairs[58]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
-                lane_pair_load(&w->fh[47]));
+                lane_pair_of(fh_pairs[94], fh_pairs[96]));
         lane_pair_store(&t->Phi[69], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&t->Phi[71], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
-                lane_pair_load(&w->fh[14]));
+                lane_pair_of(fh_pairs[28], fh_pairs[30]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
-                lane_pair_load(&w->fh[32]));
+                lane_pair_of(fh_pairs[64], fh_pairs[66]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
-                lane_pair_load(&w->fh[51]));
+                lane_pair_of(fh_pairs[102], fh_pairs[104]));
         lane_pair_store(&t->Phi[73], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
-                lane_pair_load(&w->fh[16]));
+                lane_pair_of(fh_pairs[32], fh_pairs[34]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
-                lane_pair_load(&w->fh[34]));
+                lane_pair_of(fh_pairs[68], fh_pairs[70]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
-                lane_pair_load(&w->fh[53]));
+                lane_pair_of(fh_pairs[106], fh_pairs[108]));
         lane_pair_store(&t->Phi[75], pair);
     }
-    t->Phi[77] = w->S[24]*w->fh[18] + w->S[25]*w->fh[36] + w->S[26]*w->fh[55];
+    t->Phi[77] = w->S[24]*fh_pairs[36] + w->S[25]*fh_pairs[72] + w->S[26]*fh_pairs[110];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[27], w->S[27]),
-                lane_pair_load(&w->fh[64]));
+                lane_pair_of(fh_pairs[128], fh_pairs[130]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[28], w->S[28]),
-                lane_pair_load(&w->fh[75]));
+                lane_pair_of(fh_pairs[150], fh_pairs[152]));
         lane_pair_store(&t->Phi[78], pair);
     }
-    t->Phi[80] = w->S[27]*w->fh[66] + w->S[28]*w->fh[77];
+    t->Phi[80] = w->S[27]*fh_pairs[132] + w->S[28]*fh_pairs[154];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[36], w->S[36]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
-                lane_pair_load(&w->fh[22]));
+                lane_pair_of(fh_pairs[44], fh_pairs[46]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[38], w->S[38]),
-                lane_pair_load(&w->fh[41]));
+                lane_pair_of(fh_pairs[82], fh_pairs[84]));
         lane_pair_store(&t->Phi[87], pair);
     }
-    t->Phi[89] = w->S[36]*w->fh[6] + w->S[37]*w->fh[24] + w->S[38]*w->fh[43];
+    t->Phi[89] = w->S[36]*fh_pairs[12] + w->S[37]*fh_pairs[48] + w->S[38]*fh_pairs[86];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[36], w->S[36]),
-                lane_pair_load(&w->fh[10]));
+                lane_pair_of(fh_pairs[20], fh_pairs[22]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
-                lane_pair_load(&w->fh[28]));
+                lane_pair_of(fh_pairs[56], fh_pairs[58]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[38], w->S[38]),
-                lane_pair_load(&w->fh[47]));
+                lane_pair_of(fh_pairs[94], fh_pairs[96]));
         lane_pair_store(&t->Phi[96], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[36], w->S[36]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[38], w->S[38]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&t->Phi[98], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[36], w->S[36]),
-                lane_pair_load(&w->fh[14]));
+                lane_pair_of(fh_pairs[28], fh_pairs[30]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
-                lane_pair_load(&w->fh[32]));
+                lane_pair_of(fh_pairs[64], fh_pairs[66]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[38], w->S[38]),
-                lane_pair_load(&w->fh[51]));
+                lane_pair_of(fh_pairs[102], fh_pairs[104]));
         lane_pair_store(&t->Phi[100], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[36], w->S[36]),
-                lane_pair_load(&w->fh[16]));
+                lane_pair_of(fh_pairs[32], fh_pairs[34]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
-                lane_pair_load(&w->fh[34]));
+                lane_pair_of(fh_pairs[68], fh_pairs[70]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[38], w->S[38]),
-                lane_pair_load(&w->fh[53]));
+                lane_pair_of(fh_pairs[106], fh_pairs[108]));
         lane_pair_store(&t->Phi[102], pair);
     }
-    t->Phi[104] = w->S[36]*w->fh[18] + w->S[37]*w->fh[36] + w->S[38]*w->fh[55];
+    t->Phi[104] = w->S[36]*fh_pairs[36] + w->S[37]*fh_pairs[72] + w->S[38]*fh_pairs[110];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[39], w->S[39]),
-                lane_pair_load(&w->fh[64]));
+                lane_pair_of(fh_pairs[128], fh_pairs[130]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[40], w->S[40]),
-                lane_pair_load(&w->fh[75]));
+                lane_pair_of(fh_pairs[150], fh_pairs[152]));
         lane_pair_store(&t->Phi[105], pair);
     }
-    t->Phi[107] = w->S[39]*w->fh[66] + w->S[40]*w->fh[77];
+    t->Phi[107] = w->S[39]*fh_pairs[132] + w->S[40]*fh_pairs[154];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
-                lane_pair_load(&w->fh[22]));
+                lane_pair_of(fh_pairs[44], fh_pairs[46]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
-                lane_pair_load(&w->fh[41]));
+                lane_pair_of(fh_pairs[82], fh_pairs[84]));
         lane_pair_store(&t->Phi[114], pair);
     }
-    t->Phi[116] = w->S[48]*w->fh[6] + w->S[49]*w->fh[24] + w->S[50]*w->fh[43];
+    t->Phi[116] = w->S[48]*fh_pairs[12] + w->S[49]*fh_pairs[48] + w->S[50]*fh_pairs[86];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
-                lane_pair_load(&w->fh[10]));
+                lane_pair_of(fh_pairs[20], fh_pairs[22]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
-                lane_pair_load(&w->fh[28]));
+                lane_pair_of(fh_pairs[56], fh_pairs[58]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
-                lane_pair_load(&w->fh[47]));
+                lane_pair_of(fh_pairs[94], fh_pairs[96]));
         lane_pair_store(&t->Phi[123], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&t->Phi[125], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
-                lane_pair_load(&w->fh[14]));
+                lane_pair_of(fh_pairs[28], fh_pairs[30]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
-                lane_pair_load(&w->fh[32]));
+                lane_pair_of(fh_pairs[64], fh_pairs[66]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
-                lane_pair_load(&w->fh[51]));
+                lane_pair_of(fh_pairs[102], fh_pairs[104]));
         lane_pair_store(&t->Phi[127], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
-                lane_pair_load(&w->fh[16]));
+                lane_pair_of(fh_pairs[32], fh_pairs[34]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
-                lane_pair_load(&w->fh[34]));
+                lane_pair_of(fh_pairs[68], fh_pairs[70]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
-                lane_pair_load(&w->fh[53]));
+                lane_pair_of(fh_pairs[106], fh_pairs[108]));
         lane_pair_store(&t->Phi[129], pair);
     }
-    t->Phi[131] = w->S[48]*w->fh[18] + w->S[49]*w->fh[36] + w->S[50]*w->fh[55];
+    t->Phi[131] = w->S[48]*fh_pairs[36] + w->S[49]*fh_pairs[72] + w->S[50]*fh_pairs[110];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[51], w->S[51]),
-                lane_pair_load(&w->fh[64]));
+                lane_pair_of(fh_pairs[128], fh_pairs[130]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[52], w->S[52]),
-                lane_pair_load(&w->fh[75]));
+                lane_pair_of(fh_pairs[150], fh_pairs[152]));
         lane_pair_store(&t->Phi[132], pair);
     }
-    t->Phi[134] = w->S[51]*w->fh[66] + w->S[52]*w->fh[77];
+    t->Phi[134] = w->S[51]*fh_pairs[132] + w->S[52]*fh_pairs[154];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[60], w->S[60]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
-                lane_pair_load(&w->fh[22]));
+                lane_pair_of(fh_pairs[44], fh_pairs[46]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[62], w->S[62]),
-                lane_pair_load(&w->fh[41]));
+                lane_pair_of(fh_pairs[82], fh_pairs[84]));
         lane_pair_store(&t->Phi[141], pair);
     }
-    t->Phi[143] = w->S[60]*w->fh[6] + w->S[61]*w->fh[24] + w->S[62]*w->fh[43];
+    t->Phi[143] = w->S[60]*fh_pairs[12] + w->S[61]*fh_pairs[48] + w->S[62]*fh_pairs[86];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[60], w->S[60]),
-                lane_pair_load(&w->fh[10]));
+                lane_pair_of(fh_pairs[20], fh_pairs[22]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
-                lane_pair_load(&w->fh[28]));
+                lane_pair_of(fh_pairs[56], fh_pairs[58]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[62], w->S[62]),
-                lane_pair_load(&w->fh[47]));
+                lane_pair_of(fh_pairs[94], fh_pairs[96]));
         lane_pair_store(&t->Phi[150], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[60], w->S[60]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[62], w->S[62]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&t->Phi[152], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[60], w->S[60]),
-                lane_pair_load(&w->fh[14]));
+                lane_pair_of(fh_pairs[28], fh_pairs[30]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
-                lane_pair_load(&w->fh[32]));
+                lane_pair_of(fh_pairs[64], fh_pairs[66]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[62], w->S[62]),
-                lane_pair_load(&w->fh[51]));
+                lane_pair_of(fh_pairs[102], fh_pairs[104]));
         lane_pair_store(&t->Phi[154], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[60], w->S[60]),
-                lane_pair_load(&w->fh[16]));
+                lane_pair_of(fh_pairs[32], fh_pairs[34]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
-                lane_pair_load(&w->fh[34]));
+                lane_pair_of(fh_pairs[68], fh_pairs[70]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[62], w->S[62]),
-                lane_pair_load(&w->fh[53]));
+                lane_pair_of(fh_pairs[106], fh_pairs[108]));
         lane_pair_store(&t->Phi[156], pair);
     }
-    t->Phi[158] = w->S[60]*w->fh[18] + w->S[61]*w->fh[36] + w->S[62]*w->fh[55];
+    t->Phi[158] = w->S[60]*fh_pairs[36] + w->S[61]*fh_pairs[72] + w->S[62]*fh_pairs[110];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[63], w->S[63]),
-                lane_pair_load(&w->fh[64]));
+                lane_pair_of(fh_pairs[128], fh_pairs[130]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[64], w->S[64]),
-                lane_pair_load(&w->fh[75]));
+                lane_pair_of(fh_pairs[150], fh_pairs[152]));
         lane_pair_store(&t->Phi[159], pair);
     }
-    t->Phi[161] = w->S[63]*w->fh[66] + w->S[64]*w->fh[77];
+    t->Phi[161] = w->S[63]*fh_pairs[132] + w->S[64]*fh_pairs[154];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
-                lane_pair_load(&w->fh[22]));
+                lane_pair_of(fh_pairs[44], fh_pairs[46]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
-                lane_pair_load(&w->fh[41]));
+                lane_pair_of(fh_pairs[82], fh_pairs[84]));
         lane_pair_store(&t->Phi[169], pair);
     }
-    t->Phi[171] = w->S[72]*w->fh[6] + w->S[73]*w->fh[24] + w->S[74]*w->fh[43];
+    t->Phi[171] = w->S[72]*fh_pairs[12] + w->S[73]*fh_pairs[48] + w->S[74]*fh_pairs[86];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
-                lane_pair_load(&w->fh[10]));
+                lane_pair_of(fh_pairs[20], fh_pairs[22]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
-                lane_pair_load(&w->fh[28]));
+                lane_pair_of(fh_pairs[56], fh_pairs[58]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
-                lane_pair_load(&w->fh[47]));
+                lane_pair_of(fh_pairs[94], fh_pairs[96]));
         lane_pair_store(&t->Phi[178], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
-                lane_pair_load(&w->fh[12]));
+                lane_pair_of(fh_pairs[24], fh_pairs[26]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
-                lane_pair_load(&w->fh[30]));
+                lane_pair_of(fh_pairs[60], fh_pairs[62]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
-                lane_pair_load(&w->fh[49]));
+                lane_pair_of(fh_pairs[98], fh_pairs[100]));
         lane_pair_store(&t->Phi[180], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
-                lane_pair_load(&w->fh[14]));
+                lane_pair_of(fh_pairs[28], fh_pairs[30]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
-                lane_pair_load(&w->fh[32]));
+                lane_pair_of(fh_pairs[64], fh_pairs[66]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
-                lane_pair_load(&w->fh[51]));
+                lane_pair_of(fh_pairs[102], fh_pairs[104]));
         lane_pair_store(&t->Phi[182], pair);
     }
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
-                lane_pair_load(&w->fh[16]));
+                lane_pair_of(fh_pairs[32], fh_pairs[34]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
-                lane_pair_load(&w->fh[34]));
+                lane_pair_of(fh_pairs[68], fh_pairs[70]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
-                lane_pair_load(&w->fh[53]));
+                lane_pair_of(fh_pairs[106], fh_pairs[108]));
         lane_pair_store(&t->Phi[184], pair);
     }
-    t->Phi[186] = w->S[72]*w->fh[18] + w->S[73]*w->fh[36] + w->S[74]*w->fh[55];
+    t->Phi[186] = w->S[72]*fh_pairs[36] + w->S[73]*fh_pairs[72] + w->S[74]*fh_pairs[110];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[75], w->S[75]),
-                lane_pair_load(&w->fh[64]));
+                lane_pair_of(fh_pairs[128], fh_pairs[130]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[76], w->S[76]),
-                lane_pair_load(&w->fh[75]));
+                lane_pair_of(fh_pairs[150], fh_pairs[152]));
         lane_pair_store(&t->Phi[187], pair);
     }
-    t->Phi[189] = w->S[75]*w->fh[66] + w->S[76]*w->fh[77];
+    t->Phi[189] = w->S[75]*fh_pairs[132] + w->S[76]*fh_pairs[154];
     t->Phi[168] = 0;
-    t->Phi[190] = one;
-    t->Phi[191] = one;
+    {
+        lane_pair pair = lane_pair_of(one, one);
+        lane_pair_store(&t->Phi[190], pair);
+    }
     t->Phi[192] = one;
-    t->Phi[199] = one;
-    t->Phi[200] = one;
-    t->Phi[201] = one;
-    t->Phi[202] = one;
-    t->Phi[203] = one;
-    t->Phi[204] = one;
-    t->Phi[205] = one;
-    t->Phi[206] = one;
-    t->Phi[207] = one;
-    t->Phi[208] = one;
-    t->Phi[209] = one;
-    t->Phi[210] = one;
-    t->Phi[211] = one;
-    t->Phi[212] = one;
-    t->Phi[213] = one;
-    t->Phi[214] = one;
+    {
+        lane_pair pair = lane_pair_of(one, one);
+        lane_pair_store(&t->Phi[199], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(one, one);
+        lane_pair_store(&t->Phi[201], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(one, one);
+        lane_pair_store(&t->Phi[203], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(one, one);
+        lane_pair_store(&t->Phi[205], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(one, one);
+        lane_pair_store(&t->Phi[207], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(one, one);
+        lane_pair_store(&t->Phi[209], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(one, one);
+        lane_pair_store(&t->Phi[211], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(one, one);
+        lane_pair_store(&t->Phi[213], pair);
+    }
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void doubling(ned_doppler32_augmented_transition *restrict t,
@@ -2671,12 +3392,21 @@ NED_DOPPLER32_AUGMENTED_BLOCK void doubling(ned_doppler32_augmented_transition *
                 t->Phi[164]*t->Phi[69+k] + t->Phi[165]*t->Phi[96+k] + t->Phi[166]*t->Phi[123+k] +
                 t->Phi[167]*t->Phi[150+k] + t->Phi[168]*t->Phi[178+k];
     }
-    w->term[0][190] = t->Phi[193]*t->Phi[193];
-    w->term[0][191] = t->Phi[194]*t->Phi[194];
-    w->term[0][192] = t->Phi[195]*t->Phi[195];
-    w->term[0][193] = t->Phi[196]*t->Phi[196];
-    w->term[0][194] = t->Phi[197]*t->Phi[197];
-    w->term[0][195] = t->Phi[198]*t->Phi[198];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[193]),
+                lane_pair_load(&t->Phi[193]));
+        lane_pair_store(&w->term[0][190], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[195]),
+                lane_pair_load(&t->Phi[195]));
+        lane_pair_store(&w->term[0][192], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[197]),
+                lane_pair_load(&t->Phi[197]));
+        lane_pair_store(&w->term[0][194], pair);
+    }
     for (k = 0; k < 6; ++k) {
         w->term[1][k] = t->Phi[0]*w->S[k] + t->Phi[1]*w->S[12+k] + t->Phi[2]*w->S[24+k] +
                 t->Phi[3]*w->S[36+k] + t->Phi[4]*w->S[48+k] + t->Phi[5]*w->S[60+k];
@@ -2798,593 +3528,1665 @@ NED_DOPPLER32_AUGMENTED_BLOCK void doubling(ned_doppler32_augmented_transition *
                 t->Phi[164]*w->S[123+k] + t->Phi[165]*w->S[138+k] + t->Phi[166]*w->S[153+k] +
                 t->Phi[167]*w->S[168+k] + t->Phi[168]*w->S[184+k];
     }
-    w->term[1][190] = t->Phi[193]*w->S[84];
-    w->term[1][191] = t->Phi[194]*w->S[85];
-    w->term[1][192] = t->Phi[195]*w->S[86];
-    w->term[1][193] = t->Phi[196]*w->S[87];
-    w->term[1][194] = t->Phi[197]*w->S[88];
-    w->term[1][195] = t->Phi[198]*w->S[89];
-    w->term[0][9] = w->term[0][9] + t->Phi[9]*t->Phi[193];
-    w->term[0][10] = w->term[0][10] + t->Phi[10]*t->Phi[194];
-    w->term[0][11] = w->term[0][11] + t->Phi[11]*t->Phi[195];
-    w->term[0][12] = w->term[0][12] + t->Phi[12]*t->Phi[196];
-    w->term[0][13] = w->term[0][13] + t->Phi[13]*t->Phi[197];
-    w->term[0][14] = w->term[0][14] + t->Phi[14]*t->Phi[198];
-    w->term[0][36] = w->term[0][36] + t->Phi[36]*t->Phi[193];
-    w->term[0][37] = w->term[0][37] + t->Phi[37]*t->Phi[194];
-    w->term[0][38] = w->term[0][38] + t->Phi[38]*t->Phi[195];
-    w->term[0][39] = w->term[0][39] + t->Phi[39]*t->Phi[196];
-    w->term[0][40] = w->term[0][40] + t->Phi[40]*t->Phi[197];
-    w->term[0][41] = w->term[0][41] + t->Phi[41]*t->Phi[198];
-    w->term[0][63] = w->term[0][63] + t->Phi[63]*t->Phi[193];
-    w->term[0][64] = w->term[0][64] + t->Phi[64]*t->Phi[194];
-    w->term[0][65] = w->term[0][65] + t->Phi[65]*t->Phi[195];
-    w->term[0][66] = w->term[0][66] + t->Phi[66]*t->Phi[196];
-    w->term[0][67] = w->term[0][67] + t->Phi[67]*t->Phi[197];
-    w->term[0][68] = w->term[0][68] + t->Phi[68]*t->Phi[198];
-    w->term[0][90] = w->term[0][90] + t->Phi[90]*t->Phi[193];
-    w->term[0][91] = w->term[0][91] + t->Phi[91]*t->Phi[194];
-    w->term[0][92] = w->term[0][92] + t->Phi[92]*t->Phi[195];
-    w->term[0][93] = w->term[0][93] + t->Phi[93]*t->Phi[196];
-    w->term[0][94] = w->term[0][94] + t->Phi[94]*t->Phi[197];
-    w->term[0][95] = w->term[0][95] + t->Phi[95]*t->Phi[198];
-    w->term[0][117] = w->term[0][117] + t->Phi[117]*t->Phi[193];
-    w->term[0][118] = w->term[0][118] + t->Phi[118]*t->Phi[194];
-    w->term[0][119] = w->term[0][119] + t->Phi[119]*t->Phi[195];
-    w->term[0][120] = w->term[0][120] + t->Phi[120]*t->Phi[196];
-    w->term[0][121] = w->term[0][121] + t->Phi[121]*t->Phi[197];
-    w->term[0][122] = w->term[0][122] + t->Phi[122]*t->Phi[198];
-    w->term[0][144] = w->term[0][144] + t->Phi[144]*t->Phi[193];
-    w->term[0][145] = w->term[0][145] + t->Phi[145]*t->Phi[194];
-    w->term[0][146] = w->term[0][146] + t->Phi[146]*t->Phi[195];
-    w->term[0][147] = w->term[0][147] + t->Phi[147]*t->Phi[196];
-    w->term[0][148] = w->term[0][148] + t->Phi[148]*t->Phi[197];
-    w->term[0][149] = w->term[0][149] + t->Phi[149]*t->Phi[198];
-    w->term[0][172] = w->term[0][172] + t->Phi[172]*t->Phi[193];
-    w->term[0][173] = w->term[0][173] + t->Phi[173]*t->Phi[194];
-    w->term[0][174] = w->term[0][174] + t->Phi[174]*t->Phi[195];
-    w->term[0][175] = w->term[0][175] + t->Phi[175]*t->Phi[196];
-    w->term[0][176] = w->term[0][176] + t->Phi[176]*t->Phi[197];
-    w->term[0][177] = w->term[0][177] + t->Phi[177]*t->Phi[198];
-    w->term[1][6] = w->term[1][6] + t->Phi[6];
-    w->term[1][7] = w->term[1][7] + t->Phi[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[193]), lane_pair_load(&w->S[84]));
+        lane_pair_store(&w->term[1][190], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[195]), lane_pair_load(&w->S[86]));
+        lane_pair_store(&w->term[1][192], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[197]), lane_pair_load(&w->S[88]));
+        lane_pair_store(&w->term[1][194], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][9]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[9]),
+                lane_pair_load(&t->Phi[193]));
+        lane_pair_store(&w->term[0][9], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][11]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[11]),
+                lane_pair_load(&t->Phi[195]));
+        lane_pair_store(&w->term[0][11], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][13]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[13]),
+                lane_pair_load(&t->Phi[197]));
+        lane_pair_store(&w->term[0][13], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][36]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[36]),
+                lane_pair_load(&t->Phi[193]));
+        lane_pair_store(&w->term[0][36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][38]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[38]),
+                lane_pair_load(&t->Phi[195]));
+        lane_pair_store(&w->term[0][38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][40]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[40]),
+                lane_pair_load(&t->Phi[197]));
+        lane_pair_store(&w->term[0][40], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][63]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[63]),
+                lane_pair_load(&t->Phi[193]));
+        lane_pair_store(&w->term[0][63], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][65]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[65]),
+                lane_pair_load(&t->Phi[195]));
+        lane_pair_store(&w->term[0][65], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][67]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[67]),
+                lane_pair_load(&t->Phi[197]));
+        lane_pair_store(&w->term[0][67], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][90]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[90]),
+                lane_pair_load(&t->Phi[193]));
+        lane_pair_store(&w->term[0][90], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][92]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[92]),
+                lane_pair_load(&t->Phi[195]));
+        lane_pair_store(&w->term[0][92], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][94]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[94]),
+                lane_pair_load(&t->Phi[197]));
+        lane_pair_store(&w->term[0][94], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][117]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[117]),
+                lane_pair_load(&t->Phi[193]));
+        lane_pair_store(&w->term[0][117], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][119]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[119]),
+                lane_pair_load(&t->Phi[195]));
+        lane_pair_store(&w->term[0][119], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][121]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[121]),
+                lane_pair_load(&t->Phi[197]));
+        lane_pair_store(&w->term[0][121], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][144]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[144]),
+                lane_pair_load(&t->Phi[193]));
+        lane_pair_store(&w->term[0][144], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][146]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[146]),
+                lane_pair_load(&t->Phi[195]));
+        lane_pair_store(&w->term[0][146], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][148]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[148]),
+                lane_pair_load(&t->Phi[197]));
+        lane_pair_store(&w->term[0][148], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][172]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[172]),
+                lane_pair_load(&t->Phi[193]));
+        lane_pair_store(&w->term[0][172], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][174]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[174]),
+                lane_pair_load(&t->Phi[195]));
+        lane_pair_store(&w->term[0][174], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][176]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[176]),
+                lane_pair_load(&t->Phi[197]));
+        lane_pair_store(&w->term[0][176], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][6]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[6]));
+        lane_pair_store(&w->term[1][6], pair);
+    }
     w->term[1][8] = w->term[1][8] + t->Phi[8];
-    w->term[1][9] = w->term[1][9] + t->Phi[9]*w->S[84];
-    w->term[1][10] = w->term[1][10] + t->Phi[10]*w->S[85];
-    w->term[1][11] = w->term[1][11] + t->Phi[11]*w->S[86];
-    w->term[1][12] = w->term[1][12] + t->Phi[12]*w->S[87];
-    w->term[1][13] = w->term[1][13] + t->Phi[13]*w->S[88];
-    w->term[1][14] = w->term[1][14] + t->Phi[14]*w->S[89];
-    w->term[1][15] = w->term[1][15] + t->Phi[15];
-    w->term[1][16] = w->term[1][16] + t->Phi[16];
-    w->term[1][17] = w->term[1][17] + t->Phi[17];
-    w->term[1][18] = w->term[1][18] + t->Phi[18];
-    w->term[1][19] = w->term[1][19] + t->Phi[19];
-    w->term[1][20] = w->term[1][20] + t->Phi[20];
-    w->term[1][21] = w->term[1][21] + t->Phi[21];
-    w->term[1][22] = w->term[1][22] + t->Phi[22];
-    w->term[1][23] = w->term[1][23] + t->Phi[23];
-    w->term[1][24] = w->term[1][24] + t->Phi[24];
-    w->term[1][25] = w->term[1][25] + t->Phi[25];
-    w->term[1][26] = w->term[1][26] + t->Phi[26];
-    w->term[1][33] = w->term[1][33] + t->Phi[33];
-    w->term[1][34] = w->term[1][34] + t->Phi[34];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][9]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[9]), lane_pair_load(&w->S[84]));
+        lane_pair_store(&w->term[1][9], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][11]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[11]), lane_pair_load(&w->S[86]));
+        lane_pair_store(&w->term[1][11], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][13]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[13]), lane_pair_load(&w->S[88]));
+        lane_pair_store(&w->term[1][13], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][15]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[15]));
+        lane_pair_store(&w->term[1][15], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][17]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[17]));
+        lane_pair_store(&w->term[1][17], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][19]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[19]));
+        lane_pair_store(&w->term[1][19], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][21]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[21]));
+        lane_pair_store(&w->term[1][21], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][23]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[23]));
+        lane_pair_store(&w->term[1][23], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][25]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[25]));
+        lane_pair_store(&w->term[1][25], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][33]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[33]));
+        lane_pair_store(&w->term[1][33], pair);
+    }
     w->term[1][35] = w->term[1][35] + t->Phi[35];
-    w->term[1][36] = w->term[1][36] + t->Phi[36]*w->S[84];
-    w->term[1][37] = w->term[1][37] + t->Phi[37]*w->S[85];
-    w->term[1][38] = w->term[1][38] + t->Phi[38]*w->S[86];
-    w->term[1][39] = w->term[1][39] + t->Phi[39]*w->S[87];
-    w->term[1][40] = w->term[1][40] + t->Phi[40]*w->S[88];
-    w->term[1][41] = w->term[1][41] + t->Phi[41]*w->S[89];
-    w->term[1][42] = w->term[1][42] + t->Phi[42];
-    w->term[1][43] = w->term[1][43] + t->Phi[43];
-    w->term[1][44] = w->term[1][44] + t->Phi[44];
-    w->term[1][45] = w->term[1][45] + t->Phi[45];
-    w->term[1][46] = w->term[1][46] + t->Phi[46];
-    w->term[1][47] = w->term[1][47] + t->Phi[47];
-    w->term[1][48] = w->term[1][48] + t->Phi[48];
-    w->term[1][49] = w->term[1][49] + t->Phi[49];
-    w->term[1][50] = w->term[1][50] + t->Phi[50];
-    w->term[1][51] = w->term[1][51] + t->Phi[51];
-    w->term[1][52] = w->term[1][52] + t->Phi[52];
-    w->term[1][53] = w->term[1][53] + t->Phi[53];
-    w->term[1][60] = w->term[1][60] + t->Phi[60];
-    w->term[1][61] = w->term[1][61] + t->Phi[61];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][36]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[36]), lane_pair_load(&w->S[84]));
+        lane_pair_store(&w->term[1][36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][38]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[38]), lane_pair_load(&w->S[86]));
+        lane_pair_store(&w->term[1][38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][40]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[40]), lane_pair_load(&w->S[88]));
+        lane_pair_store(&w->term[1][40], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][42]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[42]));
+        lane_pair_store(&w->term[1][42], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][44]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[44]));
+        lane_pair_store(&w->term[1][44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][46]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[46]));
+        lane_pair_store(&w->term[1][46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][48]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[48]));
+        lane_pair_store(&w->term[1][48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][50]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[50]));
+        lane_pair_store(&w->term[1][50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][52]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[52]));
+        lane_pair_store(&w->term[1][52], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][60]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[60]));
+        lane_pair_store(&w->term[1][60], pair);
+    }
     w->term[1][62] = w->term[1][62] + t->Phi[62];
-    w->term[1][63] = w->term[1][63] + t->Phi[63]*w->S[84];
-    w->term[1][64] = w->term[1][64] + t->Phi[64]*w->S[85];
-    w->term[1][65] = w->term[1][65] + t->Phi[65]*w->S[86];
-    w->term[1][66] = w->term[1][66] + t->Phi[66]*w->S[87];
-    w->term[1][67] = w->term[1][67] + t->Phi[67]*w->S[88];
-    w->term[1][68] = w->term[1][68] + t->Phi[68]*w->S[89];
-    w->term[1][69] = w->term[1][69] + t->Phi[69];
-    w->term[1][70] = w->term[1][70] + t->Phi[70];
-    w->term[1][71] = w->term[1][71] + t->Phi[71];
-    w->term[1][72] = w->term[1][72] + t->Phi[72];
-    w->term[1][73] = w->term[1][73] + t->Phi[73];
-    w->term[1][74] = w->term[1][74] + t->Phi[74];
-    w->term[1][75] = w->term[1][75] + t->Phi[75];
-    w->term[1][76] = w->term[1][76] + t->Phi[76];
-    w->term[1][77] = w->term[1][77] + t->Phi[77];
-    w->term[1][78] = w->term[1][78] + t->Phi[78];
-    w->term[1][79] = w->term[1][79] + t->Phi[79];
-    w->term[1][80] = w->term[1][80] + t->Phi[80];
-    w->term[1][87] = w->term[1][87] + t->Phi[87];
-    w->term[1][88] = w->term[1][88] + t->Phi[88];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][63]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[63]), lane_pair_load(&w->S[84]));
+        lane_pair_store(&w->term[1][63], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][65]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[65]), lane_pair_load(&w->S[86]));
+        lane_pair_store(&w->term[1][65], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][67]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[67]), lane_pair_load(&w->S[88]));
+        lane_pair_store(&w->term[1][67], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][69]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[69]));
+        lane_pair_store(&w->term[1][69], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][71]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[71]));
+        lane_pair_store(&w->term[1][71], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][73]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[73]));
+        lane_pair_store(&w->term[1][73], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][75]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[75]));
+        lane_pair_store(&w->term[1][75], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][77]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[77]));
+        lane_pair_store(&w->term[1][77], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][79]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[79]));
+        lane_pair_store(&w->term[1][79], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][87]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[87]));
+        lane_pair_store(&w->term[1][87], pair);
+    }
     w->term[1][89] = w->term[1][89] + t->Phi[89];
-    w->term[1][90] = w->term[1][90] + t->Phi[90]*w->S[84];
-    w->term[1][91] = w->term[1][91] + t->Phi[91]*w->S[85];
-    w->term[1][92] = w->term[1][92] + t->Phi[92]*w->S[86];
-    w->term[1][93] = w->term[1][93] + t->Phi[93]*w->S[87];
-    w->term[1][94] = w->term[1][94] + t->Phi[94]*w->S[88];
-    w->term[1][95] = w->term[1][95] + t->Phi[95]*w->S[89];
-    w->term[1][96] = w->term[1][96] + t->Phi[96];
-    w->term[1][97] = w->term[1][97] + t->Phi[97];
-    w->term[1][98] = w->term[1][98] + t->Phi[98];
-    w->term[1][99] = w->term[1][99] + t->Phi[99];
-    w->term[1][100] = w->term[1][100] + t->Phi[100];
-    w->term[1][101] = w->term[1][101] + t->Phi[101];
-    w->term[1][102] = w->term[1][102] + t->Phi[102];
-    w->term[1][103] = w->term[1][103] + t->Phi[103];
-    w->term[1][104] = w->term[1][104] + t->Phi[104];
-    w->term[1][105] = w->term[1][105] + t->Phi[105];
-    w->term[1][106] = w->term[1][106] + t->Phi[106];
-    w->term[1][107] = w->term[1][107] + t->Phi[107];
-    w->term[1][114] = w->term[1][114] + t->Phi[114];
-    w->term[1][115] = w->term[1][115] + t->Phi[115];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][90]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[90]), lane_pair_load(&w->S[84]));
+        lane_pair_store(&w->term[1][90], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][92]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[92]), lane_pair_load(&w->S[86]));
+        lane_pair_store(&w->term[1][92], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][94]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[94]), lane_pair_load(&w->S[88]));
+        lane_pair_store(&w->term[1][94], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][96]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[96]));
+        lane_pair_store(&w->term[1][96], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][98]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[98]));
+        lane_pair_store(&w->term[1][98], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][100]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[100]));
+        lane_pair_store(&w->term[1][100], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][102]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[102]));
+        lane_pair_store(&w->term[1][102], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][104]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[104]));
+        lane_pair_store(&w->term[1][104], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][106]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[106]));
+        lane_pair_store(&w->term[1][106], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][114]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[114]));
+        lane_pair_store(&w->term[1][114], pair);
+    }
     w->term[1][116] = w->term[1][116] + t->Phi[116];
-    w->term[1][117] = w->term[1][117] + t->Phi[117]*w->S[84];
-    w->term[1][118] = w->term[1][118] + t->Phi[118]*w->S[85];
-    w->term[1][119] = w->term[1][119] + t->Phi[119]*w->S[86];
-    w->term[1][120] = w->term[1][120] + t->Phi[120]*w->S[87];
-    w->term[1][121] = w->term[1][121] + t->Phi[121]*w->S[88];
-    w->term[1][122] = w->term[1][122] + t->Phi[122]*w->S[89];
-    w->term[1][123] = w->term[1][123] + t->Phi[123];
-    w->term[1][124] = w->term[1][124] + t->Phi[124];
-    w->term[1][125] = w->term[1][125] + t->Phi[125];
-    w->term[1][126] = w->term[1][126] + t->Phi[126];
-    w->term[1][127] = w->term[1][127] + t->Phi[127];
-    w->term[1][128] = w->term[1][128] + t->Phi[128];
-    w->term[1][129] = w->term[1][129] + t->Phi[129];
-    w->term[1][130] = w->term[1][130] + t->Phi[130];
-    w->term[1][131] = w->term[1][131] + t->Phi[131];
-    w->term[1][132] = w->term[1][132] + t->Phi[132];
-    w->term[1][133] = w->term[1][133] + t->Phi[133];
-    w->term[1][134] = w->term[1][134] + t->Phi[134];
-    w->term[1][141] = w->term[1][141] + t->Phi[141];
-    w->term[1][142] = w->term[1][142] + t->Phi[142];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][117]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[117]), lane_pair_load(&w->S[84]));
+        lane_pair_store(&w->term[1][117], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][119]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[119]), lane_pair_load(&w->S[86]));
+        lane_pair_store(&w->term[1][119], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][121]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[121]), lane_pair_load(&w->S[88]));
+        lane_pair_store(&w->term[1][121], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][123]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[123]));
+        lane_pair_store(&w->term[1][123], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][125]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[125]));
+        lane_pair_store(&w->term[1][125], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][127]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[127]));
+        lane_pair_store(&w->term[1][127], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][129]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[129]));
+        lane_pair_store(&w->term[1][129], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][131]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[131]));
+        lane_pair_store(&w->term[1][131], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][133]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[133]));
+        lane_pair_store(&w->term[1][133], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][141]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[141]));
+        lane_pair_store(&w->term[1][141], pair);
+    }
     w->term[1][143] = w->term[1][143] + t->Phi[143];
-    w->term[1][144] = w->term[1][144] + t->Phi[144]*w->S[84];
-    w->term[1][145] = w->term[1][145] + t->Phi[145]*w->S[85];
-    w->term[1][146] = w->term[1][146] + t->Phi[146]*w->S[86];
-    w->term[1][147] = w->term[1][147] + t->Phi[147]*w->S[87];
-    w->term[1][148] = w->term[1][148] + t->Phi[148]*w->S[88];
-    w->term[1][149] = w->term[1][149] + t->Phi[149]*w->S[89];
-    w->term[1][150] = w->term[1][150] + t->Phi[150];
-    w->term[1][151] = w->term[1][151] + t->Phi[151];
-    w->term[1][152] = w->term[1][152] + t->Phi[152];
-    w->term[1][153] = w->term[1][153] + t->Phi[153];
-    w->term[1][154] = w->term[1][154] + t->Phi[154];
-    w->term[1][155] = w->term[1][155] + t->Phi[155];
-    w->term[1][156] = w->term[1][156] + t->Phi[156];
-    w->term[1][157] = w->term[1][157] + t->Phi[157];
-    w->term[1][158] = w->term[1][158] + t->Phi[158];
-    w->term[1][159] = w->term[1][159] + t->Phi[159];
-    w->term[1][160] = w->term[1][160] + t->Phi[160];
-    w->term[1][161] = w->term[1][161] + t->Phi[161];
-    w->term[1][169] = w->term[1][169] + t->Phi[169];
-    w->term[1][170] = w->term[1][170] + t->Phi[170];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][144]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[144]), lane_pair_load(&w->S[84]));
+        lane_pair_store(&w->term[1][144], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][146]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[146]), lane_pair_load(&w->S[86]));
+        lane_pair_store(&w->term[1][146], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][148]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[148]), lane_pair_load(&w->S[88]));
+        lane_pair_store(&w->term[1][148], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][150]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[150]));
+        lane_pair_store(&w->term[1][150], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][152]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[152]));
+        lane_pair_store(&w->term[1][152], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][154]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[154]));
+        lane_pair_store(&w->term[1][154], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][156]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[156]));
+        lane_pair_store(&w->term[1][156], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][158]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[158]));
+        lane_pair_store(&w->term[1][158], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][160]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[160]));
+        lane_pair_store(&w->term[1][160], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][169]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[169]));
+        lane_pair_store(&w->term[1][169], pair);
+    }
     w->term[1][171] = w->term[1][171] + t->Phi[171];
-    w->term[1][172] = w->term[1][172] + t->Phi[172]*w->S[84];
-    w->term[1][173] = w->term[1][173] + t->Phi[173]*w->S[85];
-    w->term[1][174] = w->term[1][174] + t->Phi[174]*w->S[86];
-    w->term[1][175] = w->term[1][175] + t->Phi[175]*w->S[87];
-    w->term[1][176] = w->term[1][176] + t->Phi[176]*w->S[88];
-    w->term[1][177] = w->term[1][177] + t->Phi[177]*w->S[89];
-    w->term[1][178] = w->term[1][178] + t->Phi[178];
-    w->term[1][179] = w->term[1][179] + t->Phi[179];
-    w->term[1][180] = w->term[1][180] + t->Phi[180];
-    w->term[1][181] = w->term[1][181] + t->Phi[181];
-    w->term[1][182] = w->term[1][182] + t->Phi[182];
-    w->term[1][183] = w->term[1][183] + t->Phi[183];
-    w->term[1][184] = w->term[1][184] + t->Phi[184];
-    w->term[1][185] = w->term[1][185] + t->Phi[185];
-    w->term[1][186] = w->term[1][186] + t->Phi[186];
-    w->term[1][187] = w->term[1][187] + t->Phi[187];
-    w->term[1][188] = w->term[1][188] + t->Phi[188];
-    w->term[1][189] = w->term[1][189] + t->Phi[189];
-    t->Phi[0] = t->Phi[0] + t->Phi[0] + w->term[0][0];
-    t->Phi[1] = t->Phi[1] + t->Phi[1] + w->term[0][1];
-    t->Phi[2] = t->Phi[2] + t->Phi[2] + w->term[0][2];
-    t->Phi[3] = t->Phi[3] + t->Phi[3] + w->term[0][3];
-    t->Phi[4] = t->Phi[4] + t->Phi[4] + w->term[0][4];
-    t->Phi[5] = t->Phi[5] + t->Phi[5] + w->term[0][5];
-    t->Phi[6] = t->Phi[6] + t->Phi[6] + w->term[0][6];
-    t->Phi[7] = t->Phi[7] + t->Phi[7] + w->term[0][7];
-    t->Phi[8] = t->Phi[8] + t->Phi[8] + w->term[0][8];
-    t->Phi[9] = t->Phi[9] + t->Phi[9] + w->term[0][9];
-    t->Phi[10] = t->Phi[10] + t->Phi[10] + w->term[0][10];
-    t->Phi[11] = t->Phi[11] + t->Phi[11] + w->term[0][11];
-    t->Phi[12] = t->Phi[12] + t->Phi[12] + w->term[0][12];
-    t->Phi[13] = t->Phi[13] + t->Phi[13] + w->term[0][13];
-    t->Phi[14] = t->Phi[14] + t->Phi[14] + w->term[0][14];
-    t->Phi[15] = t->Phi[15] + t->Phi[15] + w->term[0][15];
-    t->Phi[16] = t->Phi[16] + t->Phi[16] + w->term[0][16];
-    t->Phi[17] = t->Phi[17] + t->Phi[17] + w->term[0][17];
-    t->Phi[18] = t->Phi[18] + t->Phi[18] + w->term[0][18];
-    t->Phi[19] = t->Phi[19] + t->Phi[19] + w->term[0][19];
-    t->Phi[20] = t->Phi[20] + t->Phi[20] + w->term[0][20];
-    t->Phi[21] = t->Phi[21] + t->Phi[21] + w->term[0][21];
-    t->Phi[22] = t->Phi[22] + t->Phi[22] + w->term[0][22];
-    t->Phi[23] = t->Phi[23] + t->Phi[23] + w->term[0][23];
-    t->Phi[24] = t->Phi[24] + t->Phi[24] + w->term[0][24];
-    t->Phi[25] = t->Phi[25] + t->Phi[25] + w->term[0][25];
-    t->Phi[26] = t->Phi[26] + t->Phi[26] + w->term[0][26];
-    t->Phi[27] = t->Phi[27] + t->Phi[27] + w->term[0][27];
-    t->Phi[28] = t->Phi[28] + t->Phi[28] + w->term[0][28];
-    t->Phi[29] = t->Phi[29] + t->Phi[29] + w->term[0][29];
-    t->Phi[30] = t->Phi[30] + t->Phi[30] + w->term[0][30];
-    t->Phi[31] = t->Phi[31] + t->Phi[31] + w->term[0][31];
-    t->Phi[32] = t->Phi[32] + t->Phi[32] + w->term[0][32];
-    t->Phi[33] = t->Phi[33] + t->Phi[33] + w->term[0][33];
-    t->Phi[34] = t->Phi[34] + t->Phi[34] + w->term[0][34];
-    t->Phi[35] = t->Phi[35] + t->Phi[35] + w->term[0][35];
-    t->Phi[36] = t->Phi[36] + t->Phi[36] + w->term[0][36];
-    t->Phi[37] = t->Phi[37] + t->Phi[37] + w->term[0][37];
-    t->Phi[38] = t->Phi[38] + t->Phi[38] + w->term[0][38];
-    t->Phi[39] = t->Phi[39] + t->Phi[39] + w->term[0][39];
-    t->Phi[40] = t->Phi[40] + t->Phi[40] + w->term[0][40];
-    t->Phi[41] = t->Phi[41] + t->Phi[41] + w->term[0][41];
-    t->Phi[42] = t->Phi[42] + t->Phi[42] + w->term[0][42];
-    t->Phi[43] = t->Phi[43] + t->Phi[43] + w->term[0][43];
-    t->Phi[44] = t->Phi[44] + t->Phi[44] + w->term[0][44];
-    t->Phi[45] = t->Phi[45] + t->Phi[45] + w->term[0][45];
-    t->Phi[46] = t->Phi[46] + t->Phi[46] + w->term[0][46];
-    t->Phi[47] = t->Phi[47] + t->Phi[47] + w->term[0][47];
-    t->Phi[48] = t->Phi[48] + t->Phi[48] + w->term[0][48];
-    t->Phi[49] = t->Phi[49] + t->Phi[49] + w->term[0][49];
-    t->Phi[50] = t->Phi[50] + t->Phi[50] + w->term[0][50];
-    t->Phi[51] = t->Phi[51] + t->Phi[51] + w->term[0][51];
-    t->Phi[52] = t->Phi[52] + t->Phi[52] + w->term[0][52];
-    t->Phi[53] = t->Phi[53] + t->Phi[53] + w->term[0][53];
-    t->Phi[54] = t->Phi[54] + t->Phi[54] + w->term[0][54];
-    t->Phi[55] = t->Phi[55] + t->Phi[55] + w->term[0][55];
-    t->Phi[56] = t->Phi[56] + t->Phi[56] + w->term[0][56];
-    t->Phi[57] = t->Phi[57] + t->Phi[57] + w->term[0][57];
-    t->Phi[58] = t->Phi[58] + t->Phi[58] + w->term[0][58];
-    t->Phi[59] = t->Phi[59] + t->Phi[59] + w->term[0][59];
-    t->Phi[60] = t->Phi[60] + t->Phi[60] + w->term[0][60];
-    t->Phi[61] = t->Phi[61] + t->Phi[61] + w->term[0][61];
-    t->Phi[62] = t->Phi[62] + t->Phi[62] + w->term[0][62];
-    t->Phi[63] = t->Phi[63] + t->Phi[63] + w->term[0][63];
-    t->Phi[64] = t->Phi[64] + t->Phi[64] + w->term[0][64];
-    t->Phi[65] = t->Phi[65] + t->Phi[65] + w->term[0][65];
-    t->Phi[66] = t->Phi[66] + t->Phi[66] + w->term[0][66];
-    t->Phi[67] = t->Phi[67] + t->Phi[67] + w->term[0][67];
-    t->Phi[68] = t->Phi[68] + t->Phi[68] + w->term[0][68];
-    t->Phi[69] = t->Phi[69] + t->Phi[69] + w->term[0][69];
-    t->Phi[70] = t->Phi[70] + t->Phi[70] + w->term[0][70];
-    t->Phi[71] = t->Phi[71] + t->Phi[71] + w->term[0][71];
-    t->Phi[72] = t->Phi[72] + t->Phi[72] + w->term[0][72];
-    t->Phi[73] = t->Phi[73] + t->Phi[73] + w->term[0][73];
-    t->Phi[74] = t->Phi[74] + t->Phi[74] + w->term[0][74];
-    t->Phi[75] = t->Phi[75] + t->Phi[75] + w->term[0][75];
-    t->Phi[76] = t->Phi[76] + t->Phi[76] + w->term[0][76];
-    t->Phi[77] = t->Phi[77] + t->Phi[77] + w->term[0][77];
-    t->Phi[78] = t->Phi[78] + t->Phi[78] + w->term[0][78];
-    t->Phi[79] = t->Phi[79] + t->Phi[79] + w->term[0][79];
-    t->Phi[80] = t->Phi[80] + t->Phi[80] + w->term[0][80];
-    t->Phi[81] = t->Phi[81] + t->Phi[81] + w->term[0][81];
-    t->Phi[82] = t->Phi[82] + t->Phi[82] + w->term[0][82];
-    t->Phi[83] = t->Phi[83] + t->Phi[83] + w->term[0][83];
-    t->Phi[84] = t->Phi[84] + t->Phi[84] + w->term[0][84];
-    t->Phi[85] = t->Phi[85] + t->Phi[85] + w->term[0][85];
-    t->Phi[86] = t->Phi[86] + t->Phi[86] + w->term[0][86];
-    t->Phi[87] = t->Phi[87] + t->Phi[87] + w->term[0][87];
-    t->Phi[88] = t->Phi[88] + t->Phi[88] + w->term[0][88];
-    t->Phi[89] = t->Phi[89] + t->Phi[89] + w->term[0][89];
-    t->Phi[90] = t->Phi[90] + t->Phi[90] + w->term[0][90];
-    t->Phi[91] = t->Phi[91] + t->Phi[91] + w->term[0][91];
-    t->Phi[92] = t->Phi[92] + t->Phi[92] + w->term[0][92];
-    t->Phi[93] = t->Phi[93] + t->Phi[93] + w->term[0][93];
-    t->Phi[94] = t->Phi[94] + t->Phi[94] + w->term[0][94];
-    t->Phi[95] = t->Phi[95] + t->Phi[95] + w->term[0][95];
-    t->Phi[96] = t->Phi[96] + t->Phi[96] + w->term[0][96];
-    t->Phi[97] = t->Phi[97] + t->Phi[97] + w->term[0][97];
-    t->Phi[98] = t->Phi[98] + t->Phi[98] + w->term[0][98];
-    t->Phi[99] = t->Phi[99] + t->Phi[99] + w->term[0][99];
-    t->Phi[100] = t->Phi[100] + t->Phi[100] + w->term[0][100];
-    t->Phi[101] = t->Phi[101] + t->Phi[101] + w->term[0][101];
-    t->Phi[102] = t->Phi[102] + t->Phi[102] + w->term[0][102];
-    t->Phi[103] = t->Phi[103] + t->Phi[103] + w->term[0][103];
-    t->Phi[104] = t->Phi[104] + t->Phi[104] + w->term[0][104];
-    t->Phi[105] = t->Phi[105] + t->Phi[105] + w->term[0][105];
-    t->Phi[106] = t->Phi[106] + t->Phi[106] + w->term[0][106];
-    t->Phi[107] = t->Phi[107] + t->Phi[107] + w->term[0][107];
-    t->Phi[108] = t->Phi[108] + t->Phi[108] + w->term[0][108];
-    t->Phi[109] = t->Phi[109] + t->Phi[109] + w->term[0][109];
-    t->Phi[110] = t->Phi[110] + t->Phi[110] + w->term[0][110];
-    t->Phi[111] = t->Phi[111] + t->Phi[111] + w->term[0][111];
-    t->Phi[112] = t->Phi[112] + t->Phi[112] + w->term[0][112];
-    t->Phi[113] = t->Phi[113] + t->Phi[113] + w->term[0][113];
-    t->Phi[114] = t->Phi[114] + t->Phi[114] + w->term[0][114];
-    t->Phi[115] = t->Phi[115] + t->Phi[115] + w->term[0][115];
-    t->Phi[116] = t->Phi[116] + t->Phi[116] + w->term[0][116];
-    t->Phi[117] = t->Phi[117] + t->Phi[117] + w->term[0][117];
-    t->Phi[118] = t->Phi[118] + t->Phi[118] + w->term[0][118];
-    t->Phi[119] = t->Phi[119] + t->Phi[119] + w->term[0][119];
-    t->Phi[120] = t->Phi[120] + t->Phi[120] + w->term[0][120];
-    t->Phi[121] = t->Phi[121] + t->Phi[121] + w->term[0][121];
-    t->Phi[122] = t->Phi[122] + t->Phi[122] + w->term[0][122];
-    t->Phi[123] = t->Phi[123] + t->Phi[123] + w->term[0][123];
-    t->Phi[124] = t->Phi[124] + t->Phi[124] + w->term[0][124];
-    t->Phi[125] = t->Phi[125] + t->Phi[125] + w->term[0][125];
-    t->Phi[126] = t->Phi[126] + t->Phi[126] + w->term[0][126];
-    t->Phi[127] = t->Phi[127] + t->Phi[127] + w->term[0][127];
-    t->Phi[128] = t->Phi[128] + t->Phi[128] + w->term[0][128];
-    t->Phi[129] = t->Phi[129] + t->Phi[129] + w->term[0][129];
-    t->Phi[130] = t->Phi[130] + t->Phi[130] + w->term[0][130];
-    t->Phi[131] = t->Phi[131] + t->Phi[131] + w->term[0][131];
-    t->Phi[132] = t->Phi[132] + t->Phi[132] + w->term[0][132];
-    t->Phi[133] = t->Phi[133] + t->Phi[133] + w->term[0][133];
-    t->Phi[134] = t->Phi[134] + t->Phi[134] + w->term[0][134];
-    t->Phi[135] = t->Phi[135] + t->Phi[135] + w->term[0][135];
-    t->Phi[136] = t->Phi[136] + t->Phi[136] + w->term[0][136];
-    t->Phi[137] = t->Phi[137] + t->Phi[137] + w->term[0][137];
-    t->Phi[138] = t->Phi[138] + t->Phi[138] + w->term[0][138];
-    t->Phi[139] = t->Phi[139] + t->Phi[139] + w->term[0][139];
-    t->Phi[140] = t->Phi[140] + t->Phi[140] + w->term[0][140];
-    t->Phi[141] = t->Phi[141] + t->Phi[141] + w->term[0][141];
-    t->Phi[142] = t->Phi[142] + t->Phi[142] + w->term[0][142];
-    t->Phi[143] = t->Phi[143] + t->Phi[143] + w->term[0][143];
-    t->Phi[144] = t->Phi[144] + t->Phi[144] + w->term[0][144];
-    t->Phi[145] = t->Phi[145] + t->Phi[145] + w->term[0][145];
-    t->Phi[146] = t->Phi[146] + t->Phi[146] + w->term[0][146];
-    t->Phi[147] = t->Phi[147] + t->Phi[147] + w->term[0][147];
-    t->Phi[148] = t->Phi[148] + t->Phi[148] + w->term[0][148];
-    t->Phi[149] = t->Phi[149] + t->Phi[149] + w->term[0][149];
-    t->Phi[150] = t->Phi[150] + t->Phi[150] + w->term[0][150];
-    t->Phi[151] = t->Phi[151] + t->Phi[151] + w->term[0][151];
-    t->Phi[152] = t->Phi[152] + t->Phi[152] + w->term[0][152];
-    t->Phi[153] = t->Phi[153] + t->Phi[153] + w->term[0][153];
-    t->Phi[154] = t->Phi[154] + t->Phi[154] + w->term[0][154];
-    t->Phi[155] = t->Phi[155] + t->Phi[155] + w->term[0][155];
-    t->Phi[156] = t->Phi[156] + t->Phi[156] + w->term[0][156];
-    t->Phi[157] = t->Phi[157] + t->Phi[157] + w->term[0][157];
-    t->Phi[158] = t->Phi[158] + t->Phi[158] + w->term[0][158];
-    t->Phi[159] = t->Phi[159] + t->Phi[159] + w->term[0][159];
-    t->Phi[160] = t->Phi[160] + t->Phi[160] + w->term[0][160];
-    t->Phi[161] = t->Phi[161] + t->Phi[161] + w->term[0][161];
-    t->Phi[162] = t->Phi[162] + t->Phi[162] + w->term[0][162];
-    t->Phi[163] = t->Phi[163] + t->Phi[163] + w->term[0][163];
-    t->Phi[164] = t->Phi[164] + t->Phi[164] + w->term[0][164];
-    t->Phi[165] = t->Phi[165] + t->Phi[165] + w->term[0][165];
-    t->Phi[166] = t->Phi[166] + t->Phi[166] + w->term[0][166];
-    t->Phi[167] = t->Phi[167] + t->Phi[167] + w->term[0][167];
-    t->Phi[168] = t->Phi[168] + t->Phi[168] + w->term[0][168];
-    t->Phi[169] = t->Phi[169] + t->Phi[169] + w->term[0][169];
-    t->Phi[170] = t->Phi[170] + t->Phi[170] + w->term[0][170];
-    t->Phi[171] = t->Phi[171] + t->Phi[171] + w->term[0][171];
-    t->Phi[172] = t->Phi[172] + t->Phi[172] + w->term[0][172];
-    t->Phi[173] = t->Phi[173] + t->Phi[173] + w->term[0][173];
-    t->Phi[174] = t->Phi[174] + t->Phi[174] + w->term[0][174];
-    t->Phi[175] = t->Phi[175] + t->Phi[175] + w->term[0][175];
-    t->Phi[176] = t->Phi[176] + t->Phi[176] + w->term[0][176];
-    t->Phi[177] = t->Phi[177] + t->Phi[177] + w->term[0][177];
-    t->Phi[178] = t->Phi[178] + t->Phi[178] + w->term[0][178];
-    t->Phi[179] = t->Phi[179] + t->Phi[179] + w->term[0][179];
-    t->Phi[180] = t->Phi[180] + t->Phi[180] + w->term[0][180];
-    t->Phi[181] = t->Phi[181] + t->Phi[181] + w->term[0][181];
-    t->Phi[182] = t->Phi[182] + t->Phi[182] + w->term[0][182];
-    t->Phi[183] = t->Phi[183] + t->Phi[183] + w->term[0][183];
-    t->Phi[184] = t->Phi[184] + t->Phi[184] + w->term[0][184];
-    t->Phi[185] = t->Phi[185] + t->Phi[185] + w->term[0][185];
-    t->Phi[186] = t->Phi[186] + t->Phi[186] + w->term[0][186];
-    t->Phi[187] = t->Phi[187] + t->Phi[187] + w->term[0][187];
-    t->Phi[188] = t->Phi[188] + t->Phi[188] + w->term[0][188];
-    t->Phi[189] = t->Phi[189] + t->Phi[189] + w->term[0][189];
-    t->Phi[193] = t->Phi[193] + t->Phi[193] + w->term[0][190];
-    t->Phi[194] = t->Phi[194] + t->Phi[194] + w->term[0][191];
-    t->Phi[195] = t->Phi[195] + t->Phi[195] + w->term[0][192];
-    t->Phi[196] = t->Phi[196] + t->Phi[196] + w->term[0][193];
-    t->Phi[197] = t->Phi[197] + t->Phi[197] + w->term[0][194];
-    t->Phi[198] = t->Phi[198] + t->Phi[198] + w->term[0][195];
-    w->S[0] = w->S[0] + half*w->term[1][0];
-    w->S[1] = w->S[1] + half*w->term[1][1];
-    w->S[2] = w->S[2] + half*w->term[1][2];
-    w->S[3] = w->S[3] + half*w->term[1][3];
-    w->S[4] = w->S[4] + half*w->term[1][4];
-    w->S[5] = w->S[5] + half*w->term[1][5];
-    w->S[90] = w->S[90] + half*w->term[1][6];
-    w->S[91] = w->S[91] + half*w->term[1][7];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][172]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[172]), lane_pair_load(&w->S[84]));
+        lane_pair_store(&w->term[1][172], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][174]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[174]), lane_pair_load(&w->S[86]));
+        lane_pair_store(&w->term[1][174], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][176]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[176]), lane_pair_load(&w->S[88]));
+        lane_pair_store(&w->term[1][176], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][178]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[178]));
+        lane_pair_store(&w->term[1][178], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][180]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[180]));
+        lane_pair_store(&w->term[1][180], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][182]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[182]));
+        lane_pair_store(&w->term[1][182], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][184]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[184]));
+        lane_pair_store(&w->term[1][184], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][186]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[186]));
+        lane_pair_store(&w->term[1][186], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][188]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[188]));
+        lane_pair_store(&w->term[1][188], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[0]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[0]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][0]));
+        lane_pair_store(&t->Phi[0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[2]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[2]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][2]));
+        lane_pair_store(&t->Phi[2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[4]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[4]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][4]));
+        lane_pair_store(&t->Phi[4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[6]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[6]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][6]));
+        lane_pair_store(&t->Phi[6], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[8]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[8]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][8]));
+        lane_pair_store(&t->Phi[8], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[10]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[10]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][10]));
+        lane_pair_store(&t->Phi[10], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[12]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[12]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][12]));
+        lane_pair_store(&t->Phi[12], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[14]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[14]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][14]));
+        lane_pair_store(&t->Phi[14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[16]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[16]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][16]));
+        lane_pair_store(&t->Phi[16], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[18]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[18]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][18]));
+        lane_pair_store(&t->Phi[18], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[20]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[20]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][20]));
+        lane_pair_store(&t->Phi[20], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[22]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[22]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][22]));
+        lane_pair_store(&t->Phi[22], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[24]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[24]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][24]));
+        lane_pair_store(&t->Phi[24], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[26]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[26]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][26]));
+        lane_pair_store(&t->Phi[26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[28]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[28]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][28]));
+        lane_pair_store(&t->Phi[28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[30]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[30]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][30]));
+        lane_pair_store(&t->Phi[30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[32]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[32]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][32]));
+        lane_pair_store(&t->Phi[32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[34]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[34]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][34]));
+        lane_pair_store(&t->Phi[34], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[36]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[36]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][36]));
+        lane_pair_store(&t->Phi[36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[38]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[38]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][38]));
+        lane_pair_store(&t->Phi[38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[40]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[40]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][40]));
+        lane_pair_store(&t->Phi[40], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[42]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[42]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][42]));
+        lane_pair_store(&t->Phi[42], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[44]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[44]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][44]));
+        lane_pair_store(&t->Phi[44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[46]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[46]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][46]));
+        lane_pair_store(&t->Phi[46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[48]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[48]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][48]));
+        lane_pair_store(&t->Phi[48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[50]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[50]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][50]));
+        lane_pair_store(&t->Phi[50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[52]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[52]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][52]));
+        lane_pair_store(&t->Phi[52], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[54]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[54]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][54]));
+        lane_pair_store(&t->Phi[54], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[56]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[56]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][56]));
+        lane_pair_store(&t->Phi[56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[58]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[58]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][58]));
+        lane_pair_store(&t->Phi[58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[60]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[60]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][60]));
+        lane_pair_store(&t->Phi[60], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[62]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[62]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][62]));
+        lane_pair_store(&t->Phi[62], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[64]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[64]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][64]));
+        lane_pair_store(&t->Phi[64], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[66]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[66]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][66]));
+        lane_pair_store(&t->Phi[66], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[68]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[68]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][68]));
+        lane_pair_store(&t->Phi[68], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[70]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[70]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][70]));
+        lane_pair_store(&t->Phi[70], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[72]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[72]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][72]));
+        lane_pair_store(&t->Phi[72], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[74]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[74]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][74]));
+        lane_pair_store(&t->Phi[74], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[76]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[76]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][76]));
+        lane_pair_store(&t->Phi[76], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[78]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[78]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][78]));
+        lane_pair_store(&t->Phi[78], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[80]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[80]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][80]));
+        lane_pair_store(&t->Phi[80], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[82]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[82]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][82]));
+        lane_pair_store(&t->Phi[82], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[84]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[84]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][84]));
+        lane_pair_store(&t->Phi[84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[86]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[86]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][86]));
+        lane_pair_store(&t->Phi[86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[88]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[88]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][88]));
+        lane_pair_store(&t->Phi[88], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[90]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[90]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][90]));
+        lane_pair_store(&t->Phi[90], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[92]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[92]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][92]));
+        lane_pair_store(&t->Phi[92], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[94]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[94]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][94]));
+        lane_pair_store(&t->Phi[94], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[96]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[96]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][96]));
+        lane_pair_store(&t->Phi[96], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[98]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[98]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][98]));
+        lane_pair_store(&t->Phi[98], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[100]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[100]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][100]));
+        lane_pair_store(&t->Phi[100], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[102]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[102]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][102]));
+        lane_pair_store(&t->Phi[102], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[104]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[104]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][104]));
+        lane_pair_store(&t->Phi[104], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[106]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[106]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][106]));
+        lane_pair_store(&t->Phi[106], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[108]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[108]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][108]));
+        lane_pair_store(&t->Phi[108], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[110]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[110]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][110]));
+        lane_pair_store(&t->Phi[110], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[112]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[112]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][112]));
+        lane_pair_store(&t->Phi[112], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[114]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[114]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][114]));
+        lane_pair_store(&t->Phi[114], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[116]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[116]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][116]));
+        lane_pair_store(&t->Phi[116], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[118]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[118]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][118]));
+        lane_pair_store(&t->Phi[118], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[120]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[120]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][120]));
+        lane_pair_store(&t->Phi[120], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[122]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[122]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][122]));
+        lane_pair_store(&t->Phi[122], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[124]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[124]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][124]));
+        lane_pair_store(&t->Phi[124], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[126]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[126]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][126]));
+        lane_pair_store(&t->Phi[126], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[128]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[128]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][128]));
+        lane_pair_store(&t->Phi[128], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[130]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[130]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][130]));
+        lane_pair_store(&t->Phi[130], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[132]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[132]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][132]));
+        lane_pair_store(&t->Phi[132], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[134]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[134]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][134]));
+        lane_pair_store(&t->Phi[134], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[136]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[136]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][136]));
+        lane_pair_store(&t->Phi[136], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[138]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[138]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][138]));
+        lane_pair_store(&t->Phi[138], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[140]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[140]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][140]));
+        lane_pair_store(&t->Phi[140], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[142]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[142]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][142]));
+        lane_pair_store(&t->Phi[142], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[144]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[144]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][144]));
+        lane_pair_store(&t->Phi[144], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[146]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[146]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][146]));
+        lane_pair_store(&t->Phi[146], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[148]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[148]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][148]));
+        lane_pair_store(&t->Phi[148], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[150]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[150]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][150]));
+        lane_pair_store(&t->Phi[150], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[152]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[152]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][152]));
+        lane_pair_store(&t->Phi[152], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[154]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[154]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][154]));
+        lane_pair_store(&t->Phi[154], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[156]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[156]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][156]));
+        lane_pair_store(&t->Phi[156], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[158]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[158]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][158]));
+        lane_pair_store(&t->Phi[158], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[160]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[160]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][160]));
+        lane_pair_store(&t->Phi[160], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[162]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[162]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][162]));
+        lane_pair_store(&t->Phi[162], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[164]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[164]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][164]));
+        lane_pair_store(&t->Phi[164], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[166]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[166]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][166]));
+        lane_pair_store(&t->Phi[166], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[168]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[168]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][168]));
+        lane_pair_store(&t->Phi[168], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[170]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[170]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][170]));
+        lane_pair_store(&t->Phi[170], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[172]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[172]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][172]));
+        lane_pair_store(&t->Phi[172], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[174]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[174]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][174]));
+        lane_pair_store(&t->Phi[174], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[176]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[176]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][176]));
+        lane_pair_store(&t->Phi[176], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[178]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[178]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][178]));
+        lane_pair_store(&t->Phi[178], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[180]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[180]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][180]));
+        lane_pair_store(&t->Phi[180], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[182]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[182]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][182]));
+        lane_pair_store(&t->Phi[182], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[184]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[184]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][184]));
+        lane_pair_store(&t->Phi[184], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[186]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[186]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][186]));
+        lane_pair_store(&t->Phi[186], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[188]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[188]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][188]));
+        lane_pair_store(&t->Phi[188], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[193]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[193]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][190]));
+        lane_pair_store(&t->Phi[193], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[195]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[195]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][192]));
+        lane_pair_store(&t->Phi[195], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[197]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[197]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][194]));
+        lane_pair_store(&t->Phi[197], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[0]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][0]));
+        lane_pair_store(&w->S[0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[2]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][2]));
+        lane_pair_store(&w->S[2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[4]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][4]));
+        lane_pair_store(&w->S[4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[90]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][6]));
+        lane_pair_store(&w->S[90], pair);
+    }
     w->S[92] = w->S[92] + half*w->term[1][8];
-    w->S[6] = w->S[6] + half*w->term[1][9];
-    w->S[7] = w->S[7] + half*w->term[1][10];
-    w->S[8] = w->S[8] + half*w->term[1][11];
-    w->S[9] = w->S[9] + half*w->term[1][12];
-    w->S[10] = w->S[10] + half*w->term[1][13];
-    w->S[11] = w->S[11] + half*w->term[1][14];
-    w->S[93] = w->S[93] + half*w->term[1][15];
-    w->S[94] = w->S[94] + half*w->term[1][16];
-    w->S[95] = w->S[95] + half*w->term[1][17];
-    w->S[96] = w->S[96] + half*w->term[1][18];
-    w->S[97] = w->S[97] + half*w->term[1][19];
-    w->S[98] = w->S[98] + half*w->term[1][20];
-    w->S[99] = w->S[99] + half*w->term[1][21];
-    w->S[100] = w->S[100] + half*w->term[1][22];
-    w->S[101] = w->S[101] + half*w->term[1][23];
-    w->S[102] = w->S[102] + half*w->term[1][24];
-    w->S[103] = w->S[103] + half*w->term[1][25];
-    w->S[104] = w->S[104] + half*w->term[1][26];
-    w->S[12] = w->S[12] + half*w->term[1][27];
-    w->S[13] = w->S[13] + half*w->term[1][28];
-    w->S[14] = w->S[14] + half*w->term[1][29];
-    w->S[15] = w->S[15] + half*w->term[1][30];
-    w->S[16] = w->S[16] + half*w->term[1][31];
-    w->S[17] = w->S[17] + half*w->term[1][32];
-    w->S[105] = w->S[105] + half*w->term[1][33];
-    w->S[106] = w->S[106] + half*w->term[1][34];
+    {
+        lane_pair pair = lane_pair_load(&w->S[6]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][9]));
+        lane_pair_store(&w->S[6], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[8]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][11]));
+        lane_pair_store(&w->S[8], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[10]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][13]));
+        lane_pair_store(&w->S[10], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[93]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][15]));
+        lane_pair_store(&w->S[93], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[95]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][17]));
+        lane_pair_store(&w->S[95], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[97]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][19]));
+        lane_pair_store(&w->S[97], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[99]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][21]));
+        lane_pair_store(&w->S[99], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[101]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][23]));
+        lane_pair_store(&w->S[101], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[103]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][25]));
+        lane_pair_store(&w->S[103], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[12]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][27]));
+        lane_pair_store(&w->S[12], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[14]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][29]));
+        lane_pair_store(&w->S[14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[16]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][31]));
+        lane_pair_store(&w->S[16], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[105]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][33]));
+        lane_pair_store(&w->S[105], pair);
+    }
     w->S[107] = w->S[107] + half*w->term[1][35];
-    w->S[18] = w->S[18] + half*w->term[1][36];
-    w->S[19] = w->S[19] + half*w->term[1][37];
-    w->S[20] = w->S[20] + half*w->term[1][38];
-    w->S[21] = w->S[21] + half*w->term[1][39];
-    w->S[22] = w->S[22] + half*w->term[1][40];
-    w->S[23] = w->S[23] + half*w->term[1][41];
-    w->S[108] = w->S[108] + half*w->term[1][42];
-    w->S[109] = w->S[109] + half*w->term[1][43];
-    w->S[110] = w->S[110] + half*w->term[1][44];
-    w->S[111] = w->S[111] + half*w->term[1][45];
-    w->S[112] = w->S[112] + half*w->term[1][46];
-    w->S[113] = w->S[113] + half*w->term[1][47];
-    w->S[114] = w->S[114] + half*w->term[1][48];
-    w->S[115] = w->S[115] + half*w->term[1][49];
-    w->S[116] = w->S[116] + half*w->term[1][50];
-    w->S[117] = w->S[117] + half*w->term[1][51];
-    w->S[118] = w->S[118] + half*w->term[1][52];
-    w->S[119] = w->S[119] + half*w->term[1][53];
-    w->S[24] = w->S[24] + half*w->term[1][54];
-    w->S[25] = w->S[25] + half*w->term[1][55];
-    w->S[26] = w->S[26] + half*w->term[1][56];
-    w->S[27] = w->S[27] + half*w->term[1][57];
-    w->S[28] = w->S[28] + half*w->term[1][58];
-    w->S[29] = w->S[29] + half*w->term[1][59];
-    w->S[120] = w->S[120] + half*w->term[1][60];
-    w->S[121] = w->S[121] + half*w->term[1][61];
+    {
+        lane_pair pair = lane_pair_load(&w->S[18]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][36]));
+        lane_pair_store(&w->S[18], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[20]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][38]));
+        lane_pair_store(&w->S[20], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[22]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][40]));
+        lane_pair_store(&w->S[22], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[108]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][42]));
+        lane_pair_store(&w->S[108], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[110]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][44]));
+        lane_pair_store(&w->S[110], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[112]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][46]));
+        lane_pair_store(&w->S[112], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[114]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][48]));
+        lane_pair_store(&w->S[114], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[116]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][50]));
+        lane_pair_store(&w->S[116], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[118]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][52]));
+        lane_pair_store(&w->S[118], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[24]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][54]));
+        lane_pair_store(&w->S[24], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[26]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][56]));
+        lane_pair_store(&w->S[26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[28]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][58]));
+        lane_pair_store(&w->S[28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[120]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][60]));
+        lane_pair_store(&w->S[120], pair);
+    }
     w->S[122] = w->S[122] + half*w->term[1][62];
-    w->S[30] = w->S[30] + half*w->term[1][63];
-    w->S[31] = w->S[31] + half*w->term[1][64];
-    w->S[32] = w->S[32] + half*w->term[1][65];
-    w->S[33] = w->S[33] + half*w->term[1][66];
-    w->S[34] = w->S[34] + half*w->term[1][67];
-    w->S[35] = w->S[35] + half*w->term[1][68];
-    w->S[123] = w->S[123] + half*w->term[1][69];
-    w->S[124] = w->S[124] + half*w->term[1][70];
-    w->S[125] = w->S[125] + half*w->term[1][71];
-    w->S[126] = w->S[126] + half*w->term[1][72];
-    w->S[127] = w->S[127] + half*w->term[1][73];
-    w->S[128] = w->S[128] + half*w->term[1][74];
-    w->S[129] = w->S[129] + half*w->term[1][75];
-    w->S[130] = w->S[130] + half*w->term[1][76];
-    w->S[131] = w->S[131] + half*w->term[1][77];
-    w->S[132] = w->S[132] + half*w->term[1][78];
-    w->S[133] = w->S[133] + half*w->term[1][79];
-    w->S[134] = w->S[134] + half*w->term[1][80];
-    w->S[36] = w->S[36] + half*w->term[1][81];
-    w->S[37] = w->S[37] + half*w->term[1][82];
-    w->S[38] = w->S[38] + half*w->term[1][83];
-    w->S[39] = w->S[39] + half*w->term[1][84];
-    w->S[40] = w->S[40] + half*w->term[1][85];
-    w->S[41] = w->S[41] + half*w->term[1][86];
-    w->S[135] = w->S[135] + half*w->term[1][87];
-    w->S[136] = w->S[136] + half*w->term[1][88];
+    {
+        lane_pair pair = lane_pair_load(&w->S[30]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][63]));
+        lane_pair_store(&w->S[30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[32]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][65]));
+        lane_pair_store(&w->S[32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[34]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][67]));
+        lane_pair_store(&w->S[34], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[123]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][69]));
+        lane_pair_store(&w->S[123], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[125]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][71]));
+        lane_pair_store(&w->S[125], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[127]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][73]));
+        lane_pair_store(&w->S[127], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[129]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][75]));
+        lane_pair_store(&w->S[129], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[131]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][77]));
+        lane_pair_store(&w->S[131], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[133]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][79]));
+        lane_pair_store(&w->S[133], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[36]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][81]));
+        lane_pair_store(&w->S[36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[38]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][83]));
+        lane_pair_store(&w->S[38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[40]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][85]));
+        lane_pair_store(&w->S[40], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[135]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][87]));
+        lane_pair_store(&w->S[135], pair);
+    }
     w->S[137] = w->S[137] + half*w->term[1][89];
-    w->S[42] = w->S[42] + half*w->term[1][90];
-    w->S[43] = w->S[43] + half*w->term[1][91];
-    w->S[44] = w->S[44] + half*w->term[1][92];
-    w->S[45] = w->S[45] + half*w->term[1][93];
-    w->S[46] = w->S[46] + half*w->term[1][94];
-    w->S[47] = w->S[47] + half*w->term[1][95];
-    w->S[138] = w->S[138] + half*w->term[1][96];
-    w->S[139] = w->S[139] + half*w->term[1][97];
-    w->S[140] = w->S[140] + half*w->term[1][98];
-    w->S[141] = w->S[141] + half*w->term[1][99];
-    w->S[142] = w->S[142] + half*w->term[1][100];
-    w->S[143] = w->S[143] + half*w->term[1][101];
-    w->S[144] = w->S[144] + half*w->term[1][102];
-    w->S[145] = w->S[145] + half*w->term[1][103];
-    w->S[146] = w->S[146] + half*w->term[1][104];
-    w->S[147] = w->S[147] + half*w->term[1][105];
-    w->S[148] = w->S[148] + half*w->term[1][106];
-    w->S[149] = w->S[149] + half*w->term[1][107];
-    w->S[48] = w->S[48] + half*w->term[1][108];
-    w->S[49] = w->S[49] + half*w->term[1][109];
-    w->S[50] = w->S[50] + half*w->term[1][110];
-    w->S[51] = w->S[51] + half*w->term[1][111];
-    w->S[52] = w->S[52] + half*w->term[1][112];
-    w->S[53] = w->S[53] + half*w->term[1][113];
-    w->S[150] = w->S[150] + half*w->term[1][114];
-    w->S[151] = w->S[151] + half*w->term[1][115];
+    {
+        lane_pair pair = lane_pair_load(&w->S[42]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][90]));
+        lane_pair_store(&w->S[42], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[44]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][92]));
+        lane_pair_store(&w->S[44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[46]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][94]));
+        lane_pair_store(&w->S[46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[138]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][96]));
+        lane_pair_store(&w->S[138], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[140]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][98]));
+        lane_pair_store(&w->S[140], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[142]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][100]));
+        lane_pair_store(&w->S[142], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[144]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][102]));
+        lane_pair_store(&w->S[144], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[146]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][104]));
+        lane_pair_store(&w->S[146], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[148]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][106]));
+        lane_pair_store(&w->S[148], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[48]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][108]));
+        lane_pair_store(&w->S[48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[50]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][110]));
+        lane_pair_store(&w->S[50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[52]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][112]));
+        lane_pair_store(&w->S[52], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[150]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][114]));
+        lane_pair_store(&w->S[150], pair);
+    }
     w->S[152] = w->S[152] + half*w->term[1][116];
-    w->S[54] = w->S[54] + half*w->term[1][117];
-    w->S[55] = w->S[55] + half*w->term[1][118];
-    w->S[56] = w->S[56] + half*w->term[1][119];
-    w->S[57] = w->S[57] + half*w->term[1][120];
-    w->S[58] = w->S[58] + half*w->term[1][121];
-    w->S[59] = w->S[59] + half*w->term[1][122];
-    w->S[153] = w->S[153] + half*w->term[1][123];
-    w->S[154] = w->S[154] + half*w->term[1][124];
-    w->S[155] = w->S[155] + half*w->term[1][125];
-    w->S[156] = w->S[156] + half*w->term[1][126];
-    w->S[157] = w->S[157] + half*w->term[1][127];
-    w->S[158] = w->S[158] + half*w->term[1][128];
-    w->S[159] = w->S[159] + half*w->term[1][129];
-    w->S[160] = w->S[160] + half*w->term[1][130];
-    w->S[161] = w->S[161] + half*w->term[1][131];
-    w->S[162] = w->S[162] + half*w->term[1][132];
-    w->S[163] = w->S[163] + half*w->term[1][133];
-    w->S[164] = w->S[164] + half*w->term[1][134];
-    w->S[60] = w->S[60] + half*w->term[1][135];
-    w->S[61] = w->S[61] + half*w->term[1][136];
-    w->S[62] = w->S[62] + half*w->term[1][137];
-    w->S[63] = w->S[63] + half*w->term[1][138];
-    w->S[64] = w->S[64] + half*w->term[1][139];
-    w->S[65] = w->S[65] + half*w->term[1][140];
-    w->S[165] = w->S[165] + half*w->term[1][141];
-    w->S[166] = w->S[166] + half*w->term[1][142];
+    {
+        lane_pair pair = lane_pair_load(&w->S[54]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][117]));
+        lane_pair_store(&w->S[54], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[56]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][119]));
+        lane_pair_store(&w->S[56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[58]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][121]));
+        lane_pair_store(&w->S[58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[153]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][123]));
+        lane_pair_store(&w->S[153], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[155]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][125]));
+        lane_pair_store(&w->S[155], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[157]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][127]));
+        lane_pair_store(&w->S[157], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[159]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][129]));
+        lane_pair_store(&w->S[159], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[161]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][131]));
+        lane_pair_store(&w->S[161], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[163]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][133]));
+        lane_pair_store(&w->S[163], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[60]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][135]));
+        lane_pair_store(&w->S[60], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[62]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][137]));
+        lane_pair_store(&w->S[62], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[64]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][139]));
+        lane_pair_store(&w->S[64], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[165]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][141]));
+        lane_pair_store(&w->S[165], pair);
+    }
     w->S[167] = w->S[167] + half*w->term[1][143];
-    w->S[66] = w->S[66] + half*w->term[1][144];
-    w->S[67] = w->S[67] + half*w->term[1][145];
-    w->S[68] = w->S[68] + half*w->term[1][146];
-    w->S[69] = w->S[69] + half*w->term[1][147];
-    w->S[70] = w->S[70] + half*w->term[1][148];
-    w->S[71] = w->S[71] + half*w->term[1][149];
-    w->S[168] = w->S[168] + half*w->term[1][150];
-    w->S[169] = w->S[169] + half*w->term[1][151];
-    w->S[170] = w->S[170] + half*w->term[1][152];
-    w->S[171] = w->S[171] + half*w->term[1][153];
-    w->S[172] = w->S[172] + half*w->term[1][154];
-    w->S[173] = w->S[173] + half*w->term[1][155];
-    w->S[174] = w->S[174] + half*w->term[1][156];
-    w->S[175] = w->S[175] + half*w->term[1][157];
-    w->S[176] = w->S[176] + half*w->term[1][158];
-    w->S[177] = w->S[177] + half*w->term[1][159];
-    w->S[178] = w->S[178] + half*w->term[1][160];
-    w->S[179] = w->S[179] + half*w->term[1][161];
-    w->S[72] = w->S[72] + half*w->term[1][162];
-    w->S[73] = w->S[73] + half*w->term[1][163];
-    w->S[74] = w->S[74] + half*w->term[1][164];
-    w->S[75] = w->S[75] + half*w->term[1][165];
-    w->S[76] = w->S[76] + half*w->term[1][166];
-    w->S[77] = w->S[77] + half*w->term[1][167];
-    w->S[180] = w->S[180] + half*w->term[1][168];
-    w->S[181] = w->S[181] + half*w->term[1][169];
-    w->S[182] = w->S[182] + half*w->term[1][170];
-    w->S[183] = w->S[183] + half*w->term[1][171];
-    w->S[78] = w->S[78] + half*w->term[1][172];
-    w->S[79] = w->S[79] + half*w->term[1][173];
-    w->S[80] = w->S[80] + half*w->term[1][174];
-    w->S[81] = w->S[81] + half*w->term[1][175];
-    w->S[82] = w->S[82] + half*w->term[1][176];
-    w->S[83] = w->S[83] + half*w->term[1][177];
-    w->S[184] = w->S[184] + half*w->term[1][178];
-    w->S[185] = w->S[185] + half*w->term[1][179];
-    w->S[186] = w->S[186] + half*w->term[1][180];
-    w->S[187] = w->S[187] + half*w->term[1][181];
-    w->S[188] = w->S[188] + half*w->term[1][182];
-    w->S[189] = w->S[189] + half*w->term[1][183];
-    w->S[190] = w->S[190] + half*w->term[1][184];
-    w->S[191] = w->S[191] + half*w->term[1][185];
-    w->S[192] = w->S[192] + half*w->term[1][186];
-    w->S[193] = w->S[193] + half*w->term[1][187];
-    w->S[194] = w->S[194] + half*w->term[1][188];
-    w->S[195] = w->S[195] + half*w->term[1][189];
-    w->S[84] = w->S[84] + half*w->term[1][190];
-    w->S[85] = w->S[85] + half*w->term[1][191];
-    w->S[86] = w->S[86] + half*w->term[1][192];
-    w->S[87] = w->S[87] + half*w->term[1][193];
-    w->S[88] = w->S[88] + half*w->term[1][194];
-    w->S[89] = w->S[89] + half*w->term[1][195];
+    {
+        lane_pair pair = lane_pair_load(&w->S[66]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][144]));
+        lane_pair_store(&w->S[66], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[68]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][146]));
+        lane_pair_store(&w->S[68], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[70]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][148]));
+        lane_pair_store(&w->S[70], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[168]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][150]));
+        lane_pair_store(&w->S[168], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[170]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][152]));
+        lane_pair_store(&w->S[170], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[172]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][154]));
+        lane_pair_store(&w->S[172], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[174]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][156]));
+        lane_pair_store(&w->S[174], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[176]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][158]));
+        lane_pair_store(&w->S[176], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[178]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][160]));
+        lane_pair_store(&w->S[178], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[72]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][162]));
+        lane_pair_store(&w->S[72], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[74]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][164]));
+        lane_pair_store(&w->S[74], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[76]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][166]));
+        lane_pair_store(&w->S[76], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[180]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][168]));
+        lane_pair_store(&w->S[180], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[182]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][170]));
+        lane_pair_store(&w->S[182], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[78]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][172]));
+        lane_pair_store(&w->S[78], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[80]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][174]));
+        lane_pair_store(&w->S[80], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[82]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][176]));
+        lane_pair_store(&w->S[82], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[184]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][178]));
+        lane_pair_store(&w->S[184], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[186]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][180]));
+        lane_pair_store(&w->S[186], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[188]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][182]));
+        lane_pair_store(&w->S[188], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[190]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][184]));
+        lane_pair_store(&w->S[190], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[192]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][186]));
+        lane_pair_store(&w->S[192], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[194]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][188]));
+        lane_pair_store(&w->S[194], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[84]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][190]));
+        lane_pair_store(&w->S[84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[86]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][192]));
+        lane_pair_store(&w->S[86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[88]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][194]));
+        lane_pair_store(&w->S[88], pair);
+    }
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar
@@ -3400,12 +5202,21 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar
     t->Phi[112] = t->Phi[112] + one;
     t->Phi[140] = t->Phi[140] + one;
     t->Phi[168] = t->Phi[168] + one;
-    t->Phi[193] = t->Phi[193] + one;
-    t->Phi[194] = t->Phi[194] + one;
-    t->Phi[195] = t->Phi[195] + one;
-    t->Phi[196] = t->Phi[196] + one;
-    t->Phi[197] = t->Phi[197] + one;
-    t->Phi[198] = t->Phi[198] + one;
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[193]);
+        pair = lane_pair_add(pair, lane_pair_of(one, one));
+        lane_pair_store(&t->Phi[193], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[195]);
+        pair = lane_pair_add(pair, lane_pair_of(one, one));
+        lane_pair_store(&t->Phi[195], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[197]);
+        pair = lane_pair_add(pair, lane_pair_of(one, one));
+        lane_pair_store(&t->Phi[197], pair);
+    }
     v = t->Phi[0] + t->Phi[1] + t->Phi[2] + t->Phi[3] + t->Phi[4] + t->Phi[5] + t->Phi[6] +
             t->Phi[7] + t->Phi[8] + t->Phi[9] + t->Phi[10] + t->Phi[11] + t->Phi[12] + t->Phi[13] +
             t->Phi[14] + t->Phi[15] + t->Phi[16] + t->Phi[17] + t->Phi[18] + t->Phi[19] + t->Phi[20]
@@ -3444,54 +5255,102 @@ NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar
 NED_DOPPLER32_AUGMENTED_BLOCK void noise_input(const ned_doppler32_augmented_matrices *restrict m,
         ned_doppler32_augmented_discretize_scratch *restrict w)
 {
-    w->term[0][0] = w->S[6]*m->G[0];
-    w->term[0][1] = w->S[7]*m->G[1];
-    w->term[0][2] = w->S[8]*m->G[2];
-    w->term[0][3] = w->S[9]*m->G[3];
-    w->term[0][4] = w->S[10]*m->G[4];
-    w->term[0][5] = w->S[11]*m->G[5];
-    w->term[0][6] = w->S[18]*m->G[0];
-    w->term[0][7] = w->S[19]*m->G[1];
-    w->term[0][8] = w->S[20]*m->G[2];
-    w->term[0][9] = w->S[21]*m->G[3];
-    w->term[0][10] = w->S[22]*m->G[4];
-    w->term[0][11] = w->S[23]*m->G[5];
-    w->term[0][12] = w->S[30]*m->G[0];
-    w->term[0][13] = w->S[31]*m->G[1];
-    w->term[0][14] = w->S[32]*m->G[2];
-    w->term[0][15] = w->S[33]*m->G[3];
-    w->term[0][16] = w->S[34]*m->G[4];
-    w->term[0][17] = w->S[35]*m->G[5];
-    w->term[0][18] = w->S[42]*m->G[0];
-    w->term[0][19] = w->S[43]*m->G[1];
-    w->term[0][20] = w->S[44]*m->G[2];
-    w->term[0][21] = w->S[45]*m->G[3];
-    w->term[0][22] = w->S[46]*m->G[4];
-    w->term[0][23] = w->S[47]*m->G[5];
-    w->term[0][24] = w->S[54]*m->G[0];
-    w->term[0][25] = w->S[55]*m->G[1];
-    w->term[0][26] = w->S[56]*m->G[2];
-    w->term[0][27] = w->S[57]*m->G[3];
-    w->term[0][28] = w->S[58]*m->G[4];
-    w->term[0][29] = w->S[59]*m->G[5];
-    w->term[0][30] = w->S[66]*m->G[0];
-    w->term[0][31] = w->S[67]*m->G[1];
-    w->term[0][32] = w->S[68]*m->G[2];
-    w->term[0][33] = w->S[69]*m->G[3];
-    w->term[0][34] = w->S[70]*m->G[4];
-    w->term[0][35] = w->S[71]*m->G[5];
-    w->term[0][36] = w->S[78]*m->G[0];
-    w->term[0][37] = w->S[79]*m->G[1];
-    w->term[0][38] = w->S[80]*m->G[2];
-    w->term[0][39] = w->S[81]*m->G[3];
-    w->term[0][40] = w->S[82]*m->G[4];
-    w->term[0][41] = w->S[83]*m->G[5];
-    w->term[0][42] = w->S[84]*m->G[0];
-    w->term[0][43] = w->S[85]*m->G[1];
-    w->term[0][44] = w->S[86]*m->G[2];
-    w->term[0][45] = w->S[87]*m->G[3];
-    w->term[0][46] = w->S[88]*m->G[4];
-    w->term[0][47] = w->S[89]*m->G[5];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[6]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[8]), lane_pair_load(&m->G[2]));
+        lane_pair_store(&w->term[0][2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[10]), lane_pair_load(&m->G[4]));
+        lane_pair_store(&w->term[0][4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[18]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][6], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[20]), lane_pair_load(&m->G[2]));
+        lane_pair_store(&w->term[0][8], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[22]), lane_pair_load(&m->G[4]));
+        lane_pair_store(&w->term[0][10], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[30]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][12], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[32]), lane_pair_load(&m->G[2]));
+        lane_pair_store(&w->term[0][14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[34]), lane_pair_load(&m->G[4]));
+        lane_pair_store(&w->term[0][16], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[42]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][18], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[44]), lane_pair_load(&m->G[2]));
+        lane_pair_store(&w->term[0][20], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[46]), lane_pair_load(&m->G[4]));
+        lane_pair_store(&w->term[0][22], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[54]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][24], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[56]), lane_pair_load(&m->G[2]));
+        lane_pair_store(&w->term[0][26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[58]), lane_pair_load(&m->G[4]));
+        lane_pair_store(&w->term[0][28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[66]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[68]), lane_pair_load(&m->G[2]));
+        lane_pair_store(&w->term[0][32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[70]), lane_pair_load(&m->G[4]));
+        lane_pair_store(&w->term[0][34], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[78]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[80]), lane_pair_load(&m->G[2]));
+        lane_pair_store(&w->term[0][38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[82]), lane_pair_load(&m->G[4]));
+        lane_pair_store(&w->term[0][40], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[84]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][42], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[86]), lane_pair_load(&m->G[2]));
+        lane_pair_store(&w->term[0][44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[88]), lane_pair_load(&m->G[4]));
+        lane_pair_store(&w->term[0][46], pair);
+    }
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK void process_noise(const ned_doppler32_augmented_matrices *restrict m,
@@ -3558,458 +5417,237 @@ NED_DOPPLER32_AUGMENTED_BLOCK void process_noise(const ned_doppler32_augmented_m
     w->term[1][45] = w->term[0][45]*w->term[1][51];
     w->term[1][46] = w->term[0][46]*w->term[1][52];
     w->term[1][47] = w->term[0][47]*w->term[1][53];
-    t->Qd[7] = 0;
-    t->Qd[8] = 0;
+    lane_pair_store(&t->Qd[7], lane_pair_of(0, 0));
     t->Qd[9] = 0;
-    t->Qd[16] = 0;
-    t->Qd[17] = 0;
-    t->Qd[18] = 0;
-    t->Qd[19] = 0;
-    t->Qd[20] = 0;
-    t->Qd[21] = 0;
-    t->Qd[22] = 0;
-    t->Qd[23] = 0;
-    t->Qd[24] = 0;
-    t->Qd[25] = 0;
-    t->Qd[26] = 0;
-    t->Qd[27] = 0;
-    t->Qd[28] = 0;
-    t->Qd[29] = 0;
-    t->Qd[30] = 0;
-    t->Qd[31] = 0;
-    t->Qd[38] = 0;
-    t->Qd[39] = 0;
+    lane_pair_store(&t->Qd[16], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[18], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[20], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[22], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[24], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[26], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[28], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[30], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[38], lane_pair_of(0, 0));
     t->Qd[40] = 0;
-    t->Qd[47] = 0;
-    t->Qd[48] = 0;
-    t->Qd[49] = 0;
-    t->Qd[50] = 0;
-    t->Qd[51] = 0;
-    t->Qd[52] = 0;
-    t->Qd[53] = 0;
-    t->Qd[54] = 0;
-    t->Qd[55] = 0;
-    t->Qd[56] = 0;
-    t->Qd[57] = 0;
-    t->Qd[58] = 0;
-    t->Qd[59] = 0;
-    t->Qd[60] = 0;
-    t->Qd[61] = 0;
-    t->Qd[62] = 0;
-    t->Qd[68] = 0;
-    t->Qd[69] = 0;
+    lane_pair_store(&t->Qd[47], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[49], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[51], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[53], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[55], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[57], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[59], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[61], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[68], lane_pair_of(0, 0));
     t->Qd[70] = 0;
-    t->Qd[77] = 0;
-    t->Qd[78] = 0;
-    t->Qd[79] = 0;
-    t->Qd[80] = 0;
-    t->Qd[81] = 0;
-    t->Qd[82] = 0;
-    t->Qd[83] = 0;
-    t->Qd[84] = 0;
-    t->Qd[85] = 0;
-    t->Qd[86] = 0;
-    t->Qd[87] = 0;
-    t->Qd[88] = 0;
-    t->Qd[89] = 0;
-    t->Qd[90] = 0;
-    t->Qd[91] = 0;
-    t->Qd[92] = 0;
-    t->Qd[97] = 0;
-    t->Qd[98] = 0;
+    lane_pair_store(&t->Qd[77], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[79], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[81], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[83], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[85], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[87], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[89], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[91], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[97], lane_pair_of(0, 0));
     t->Qd[99] = 0;
-    t->Qd[106] = 0;
-    t->Qd[107] = 0;
-    t->Qd[108] = 0;
-    t->Qd[109] = 0;
-    t->Qd[110] = 0;
-    t->Qd[111] = 0;
-    t->Qd[112] = 0;
-    t->Qd[113] = 0;
-    t->Qd[114] = 0;
-    t->Qd[115] = 0;
-    t->Qd[116] = 0;
-    t->Qd[117] = 0;
-    t->Qd[118] = 0;
-    t->Qd[119] = 0;
-    t->Qd[120] = 0;
-    t->Qd[121] = 0;
-    t->Qd[125] = 0;
-    t->Qd[126] = 0;
+    lane_pair_store(&t->Qd[106], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[108], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[110], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[112], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[114], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[116], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[118], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[120], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[125], lane_pair_of(0, 0));
     t->Qd[127] = 0;
-    t->Qd[134] = 0;
-    t->Qd[135] = 0;
-    t->Qd[136] = 0;
-    t->Qd[137] = 0;
-    t->Qd[138] = 0;
-    t->Qd[139] = 0;
-    t->Qd[140] = 0;
-    t->Qd[141] = 0;
-    t->Qd[142] = 0;
-    t->Qd[143] = 0;
-    t->Qd[144] = 0;
-    t->Qd[145] = 0;
-    t->Qd[146] = 0;
-    t->Qd[147] = 0;
-    t->Qd[148] = 0;
-    t->Qd[149] = 0;
-    t->Qd[152] = 0;
-    t->Qd[153] = 0;
+    lane_pair_store(&t->Qd[134], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[136], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[138], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[140], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[142], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[144], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[146], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[148], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[152], lane_pair_of(0, 0));
     t->Qd[154] = 0;
-    t->Qd[161] = 0;
-    t->Qd[162] = 0;
-    t->Qd[163] = 0;
-    t->Qd[164] = 0;
-    t->Qd[165] = 0;
-    t->Qd[166] = 0;
-    t->Qd[167] = 0;
-    t->Qd[168] = 0;
-    t->Qd[169] = 0;
-    t->Qd[170] = 0;
-    t->Qd[171] = 0;
-    t->Qd[172] = 0;
-    t->Qd[173] = 0;
-    t->Qd[174] = 0;
-    t->Qd[175] = 0;
-    t->Qd[176] = 0;
-    t->Qd[178] = 0;
-    t->Qd[179] = 0;
+    lane_pair_store(&t->Qd[161], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[163], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[165], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[167], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[169], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[171], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[173], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[175], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[178], lane_pair_of(0, 0));
     t->Qd[180] = 0;
-    t->Qd[187] = 0;
-    t->Qd[188] = 0;
-    t->Qd[189] = 0;
-    t->Qd[190] = 0;
-    t->Qd[191] = 0;
-    t->Qd[192] = 0;
-    t->Qd[193] = 0;
-    t->Qd[194] = 0;
-    t->Qd[195] = 0;
-    t->Qd[196] = 0;
-    t->Qd[197] = 0;
-    t->Qd[198] = 0;
-    t->Qd[199] = 0;
-    t->Qd[200] = 0;
-    t->Qd[201] = 0;
-    t->Qd[202] = 0;
-    t->Qd[203] = 0;
-    t->Qd[204] = 0;
-    t->Qd[205] = 0;
-    t->Qd[206] = 0;
-    t->Qd[207] = 0;
-    t->Qd[208] = 0;
-    t->Qd[209] = 0;
-    t->Qd[210] = 0;
-    t->Qd[211] = 0;
-    t->Qd[212] = 0;
-    t->Qd[213] = 0;
-    t->Qd[214] = 0;
-    t->Qd[215] = 0;
-    t->Qd[216] = 0;
-    t->Qd[217] = 0;
-    t->Qd[218] = 0;
-    t->Qd[219] = 0;
-    t->Qd[220] = 0;
-    t->Qd[221] = 0;
-    t->Qd[222] = 0;
-    t->Qd[223] = 0;
-    t->Qd[224] = 0;
-    t->Qd[225] = 0;
-    t->Qd[226] = 0;
-    t->Qd[227] = 0;
-    t->Qd[228] = 0;
-    t->Qd[229] = 0;
-    t->Qd[230] = 0;
-    t->Qd[231] = 0;
-    t->Qd[232] = 0;
-    t->Qd[233] = 0;
-    t->Qd[234] = 0;
-    t->Qd[235] = 0;
-    t->Qd[236] = 0;
-    t->Qd[237] = 0;
-    t->Qd[238] = 0;
-    t->Qd[239] = 0;
-    t->Qd[240] = 0;
-    t->Qd[241] = 0;
-    t->Qd[242] = 0;
-    t->Qd[243] = 0;
-    t->Qd[244] = 0;
-    t->Qd[245] = 0;
-    t->Qd[246] = 0;
-    t->Qd[247] = 0;
-    t->Qd[248] = 0;
-    t->Qd[249] = 0;
-    t->Qd[250] = 0;
-    t->Qd[251] = 0;
-    t->Qd[252] = 0;
-    t->Qd[253] = 0;
-    t->Qd[254] = 0;
-    t->Qd[255] = 0;
-    t->Qd[256] = 0;
-    t->Qd[257] = 0;
-    t->Qd[258] = 0;
-    t->Qd[259] = 0;
-    t->Qd[260] = 0;
-    t->Qd[261] = 0;
-    t->Qd[262] = 0;
-    t->Qd[263] = 0;
-    t->Qd[264] = 0;
-    t->Qd[265] = 0;
-    t->Qd[266] = 0;
-    t->Qd[267] = 0;
-    t->Qd[268] = 0;
-    t->Qd[269] = 0;
-    t->Qd[270] = 0;
-    t->Qd[271] = 0;
-    t->Qd[272] = 0;
-    t->Qd[273] = 0;
-    t->Qd[274] = 0;
-    t->Qd[276] = 0;
-    t->Qd[277] = 0;
-    t->Qd[278] = 0;
-    t->Qd[279] = 0;
-    t->Qd[280] = 0;
-    t->Qd[281] = 0;
-    t->Qd[282] = 0;
-    t->Qd[283] = 0;
-    t->Qd[284] = 0;
-    t->Qd[285] = 0;
-    t->Qd[286] = 0;
-    t->Qd[287] = 0;
-    t->Qd[288] = 0;
-    t->Qd[289] = 0;
-    t->Qd[290] = 0;
-    t->Qd[291] = 0;
-    t->Qd[292] = 0;
-    t->Qd[293] = 0;
-    t->Qd[294] = 0;
-    t->Qd[295] = 0;
+    lane_pair_store(&t->Qd[187], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[189], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[191], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[193], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[195], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[197], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[199], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[201], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[203], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[205], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[207], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[209], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[211], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[213], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[215], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[217], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[219], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[221], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[223], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[225], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[227], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[229], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[231], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[233], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[235], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[237], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[239], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[241], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[243], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[245], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[247], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[249], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[251], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[253], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[255], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[257], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[259], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[261], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[263], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[265], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[267], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[269], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[271], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[273], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[276], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[278], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[280], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[282], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[284], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[286], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[288], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[290], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[292], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[294], lane_pair_of(0, 0));
     t->Qd[296] = 0;
-    t->Qd[298] = 0;
-    t->Qd[299] = 0;
-    t->Qd[300] = 0;
-    t->Qd[301] = 0;
-    t->Qd[302] = 0;
-    t->Qd[303] = 0;
-    t->Qd[304] = 0;
-    t->Qd[305] = 0;
-    t->Qd[306] = 0;
-    t->Qd[307] = 0;
-    t->Qd[308] = 0;
-    t->Qd[309] = 0;
-    t->Qd[310] = 0;
-    t->Qd[311] = 0;
-    t->Qd[312] = 0;
-    t->Qd[313] = 0;
-    t->Qd[314] = 0;
-    t->Qd[315] = 0;
-    t->Qd[316] = 0;
-    t->Qd[317] = 0;
-    t->Qd[319] = 0;
-    t->Qd[320] = 0;
-    t->Qd[321] = 0;
-    t->Qd[322] = 0;
-    t->Qd[323] = 0;
-    t->Qd[324] = 0;
-    t->Qd[325] = 0;
-    t->Qd[326] = 0;
-    t->Qd[327] = 0;
-    t->Qd[328] = 0;
-    t->Qd[329] = 0;
-    t->Qd[330] = 0;
-    t->Qd[331] = 0;
-    t->Qd[332] = 0;
-    t->Qd[333] = 0;
-    t->Qd[334] = 0;
-    t->Qd[335] = 0;
-    t->Qd[336] = 0;
+    lane_pair_store(&t->Qd[298], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[300], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[302], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[304], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[306], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[308], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[310], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[312], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[314], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[316], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[319], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[321], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[323], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[325], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[327], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[329], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[331], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[333], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[335], lane_pair_of(0, 0));
     t->Qd[337] = 0;
-    t->Qd[339] = 0;
-    t->Qd[340] = 0;
-    t->Qd[341] = 0;
-    t->Qd[342] = 0;
-    t->Qd[343] = 0;
-    t->Qd[344] = 0;
-    t->Qd[345] = 0;
-    t->Qd[346] = 0;
-    t->Qd[347] = 0;
-    t->Qd[348] = 0;
-    t->Qd[349] = 0;
-    t->Qd[350] = 0;
-    t->Qd[351] = 0;
-    t->Qd[352] = 0;
-    t->Qd[353] = 0;
-    t->Qd[354] = 0;
-    t->Qd[355] = 0;
-    t->Qd[356] = 0;
-    t->Qd[358] = 0;
-    t->Qd[359] = 0;
-    t->Qd[360] = 0;
-    t->Qd[361] = 0;
-    t->Qd[362] = 0;
-    t->Qd[363] = 0;
-    t->Qd[364] = 0;
-    t->Qd[365] = 0;
-    t->Qd[366] = 0;
-    t->Qd[367] = 0;
-    t->Qd[368] = 0;
-    t->Qd[369] = 0;
-    t->Qd[370] = 0;
-    t->Qd[371] = 0;
-    t->Qd[372] = 0;
-    t->Qd[373] = 0;
+    lane_pair_store(&t->Qd[339], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[341], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[343], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[345], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[347], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[349], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[351], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[353], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[355], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[358], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[360], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[362], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[364], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[366], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[368], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[370], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[372], lane_pair_of(0, 0));
     t->Qd[374] = 0;
-    t->Qd[376] = 0;
-    t->Qd[377] = 0;
-    t->Qd[378] = 0;
-    t->Qd[379] = 0;
-    t->Qd[380] = 0;
-    t->Qd[381] = 0;
-    t->Qd[382] = 0;
-    t->Qd[383] = 0;
-    t->Qd[384] = 0;
-    t->Qd[385] = 0;
-    t->Qd[386] = 0;
-    t->Qd[387] = 0;
-    t->Qd[388] = 0;
-    t->Qd[389] = 0;
-    t->Qd[390] = 0;
-    t->Qd[391] = 0;
-    t->Qd[392] = 0;
-    t->Qd[393] = 0;
-    t->Qd[394] = 0;
-    t->Qd[395] = 0;
-    t->Qd[396] = 0;
-    t->Qd[397] = 0;
-    t->Qd[398] = 0;
-    t->Qd[399] = 0;
-    t->Qd[400] = 0;
-    t->Qd[401] = 0;
-    t->Qd[402] = 0;
-    t->Qd[403] = 0;
-    t->Qd[404] = 0;
-    t->Qd[405] = 0;
-    t->Qd[406] = 0;
-    t->Qd[407] = 0;
-    t->Qd[408] = 0;
-    t->Qd[409] = 0;
-    t->Qd[410] = 0;
-    t->Qd[411] = 0;
-    t->Qd[412] = 0;
-    t->Qd[413] = 0;
-    t->Qd[414] = 0;
-    t->Qd[415] = 0;
-    t->Qd[416] = 0;
-    t->Qd[417] = 0;
-    t->Qd[418] = 0;
-    t->Qd[419] = 0;
-    t->Qd[420] = 0;
-    t->Qd[421] = 0;
-    t->Qd[422] = 0;
-    t->Qd[423] = 0;
-    t->Qd[424] = 0;
-    t->Qd[425] = 0;
-    t->Qd[426] = 0;
-    t->Qd[427] = 0;
-    t->Qd[428] = 0;
-    t->Qd[429] = 0;
-    t->Qd[430] = 0;
-    t->Qd[431] = 0;
-    t->Qd[432] = 0;
-    t->Qd[433] = 0;
-    t->Qd[434] = 0;
-    t->Qd[435] = 0;
-    t->Qd[436] = 0;
-    t->Qd[437] = 0;
-    t->Qd[438] = 0;
-    t->Qd[439] = 0;
-    t->Qd[440] = 0;
-    t->Qd[441] = 0;
-    t->Qd[442] = 0;
-    t->Qd[443] = 0;
-    t->Qd[444] = 0;
-    t->Qd[445] = 0;
-    t->Qd[446] = 0;
-    t->Qd[447] = 0;
-    t->Qd[448] = 0;
-    t->Qd[449] = 0;
-    t->Qd[450] = 0;
-    t->Qd[451] = 0;
-    t->Qd[452] = 0;
-    t->Qd[453] = 0;
-    t->Qd[454] = 0;
-    t->Qd[455] = 0;
-    t->Qd[456] = 0;
-    t->Qd[457] = 0;
-    t->Qd[458] = 0;
-    t->Qd[459] = 0;
-    t->Qd[460] = 0;
-    t->Qd[461] = 0;
-    t->Qd[462] = 0;
-    t->Qd[463] = 0;
-    t->Qd[464] = 0;
-    t->Qd[465] = 0;
-    t->Qd[466] = 0;
-    t->Qd[467] = 0;
-    t->Qd[468] = 0;
-    t->Qd[469] = 0;
-    t->Qd[470] = 0;
-    t->Qd[471] = 0;
-    t->Qd[472] = 0;
-    t->Qd[473] = 0;
-    t->Qd[474] = 0;
-    t->Qd[475] = 0;
-    t->Qd[476] = 0;
-    t->Qd[477] = 0;
-    t->Qd[478] = 0;
-    t->Qd[479] = 0;
-    t->Qd[480] = 0;
-    t->Qd[481] = 0;
-    t->Qd[482] = 0;
-    t->Qd[483] = 0;
-    t->Qd[484] = 0;
-    t->Qd[485] = 0;
-    t->Qd[486] = 0;
-    t->Qd[487] = 0;
-    t->Qd[488] = 0;
-    t->Qd[489] = 0;
-    t->Qd[490] = 0;
-    t->Qd[491] = 0;
-    t->Qd[492] = 0;
-    t->Qd[493] = 0;
-    t->Qd[494] = 0;
-    t->Qd[495] = 0;
-    t->Qd[496] = 0;
-    t->Qd[497] = 0;
-    t->Qd[498] = 0;
-    t->Qd[499] = 0;
-    t->Qd[500] = 0;
-    t->Qd[501] = 0;
-    t->Qd[502] = 0;
-    t->Qd[503] = 0;
-    t->Qd[504] = 0;
-    t->Qd[505] = 0;
-    t->Qd[506] = 0;
-    t->Qd[507] = 0;
-    t->Qd[508] = 0;
-    t->Qd[509] = 0;
-    t->Qd[510] = 0;
-    t->Qd[511] = 0;
-    t->Qd[512] = 0;
-    t->Qd[513] = 0;
-    t->Qd[514] = 0;
-    t->Qd[515] = 0;
-    t->Qd[516] = 0;
-    t->Qd[517] = 0;
-    t->Qd[518] = 0;
-    t->Qd[519] = 0;
-    t->Qd[520] = 0;
-    t->Qd[521] = 0;
-    t->Qd[522] = 0;
-    t->Qd[523] = 0;
-    t->Qd[524] = 0;
-    t->Qd[525] = 0;
-    t->Qd[526] = 0;
-    t->Qd[527] = 0;
+    lane_pair_store(&t->Qd[376], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[378], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[380], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[382], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[384], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[386], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[388], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[390], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[392], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[394], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[396], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[398], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[400], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[402], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[404], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[406], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[408], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[410], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[412], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[414], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[416], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[418], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[420], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[422], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[424], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[426], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[428], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[430], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[432], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[434], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[436], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[438], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[440], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[442], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[444], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[446], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[448], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[450], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[452], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[454], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[456], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[458], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[460], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[462], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[464], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[466], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[468], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[470], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[472], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[474], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[476], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[478], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[480], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[482], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[484], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[486], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[488], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[490], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[492], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[494], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[496], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[498], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[500], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[502], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[504], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[506], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[508], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[510], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[512], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[514], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[516], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[518], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[520], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[522], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[524], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[526], lane_pair_of(0, 0));
 }
 
 NED_DOPPLER32_AUGMENTED_BLOCK ned_doppler32_augmented_scalar

@@ -10,6 +10,7 @@
 #ifndef MODELGEN_LANE_PAIR_H
 #define MODELGEN_LANE_PAIR_H
 
+#include <stdint.h>
 #include <string.h>
 
 #include "modelgen_scalar.h"
@@ -23,6 +24,23 @@ static inline lane_pair lane_pair_load(const double *a) /* a[0], a[1] */
     lane_pair lanes;
     memcpy(&lanes, a, sizeof lanes);
     return lanes;
+}
+
+/* the two lanes stored at a, 16-byte aligned: one aligned load (a value stored twice, as the
+   unrolled discretize's F h, is then broadcast without a shuffle; may_alias: read through a
+   double array) */
+typedef double lane_pair_stored
+    __attribute__((vector_size(2 * sizeof(double)), __may_alias__));
+
+static inline lane_pair lane_pair_load_aligned(const double *a) /* a[0], a[1], a 16-byte aligned */
+{
+    return *(const lane_pair_stored *)a;
+}
+
+/* 0 or 1: a + lane_pair_offset(a) is 16-byte aligned (a is a double's address) */
+static inline size_t lane_pair_offset(const double *a)
+{
+    return (size_t)(((uintptr_t)a / sizeof(double)) & 1u);
 }
 
 static inline lane_pair lane_pair_of(const double a, const double b)
@@ -44,11 +62,26 @@ static inline lane_pair lane_pair_add_product(const lane_pair acc, const lane_pa
     return acc + a * b;
 }
 
+static inline lane_pair lane_pair_add(const lane_pair acc, const lane_pair a)
+{
+    return acc + a;
+}
+
 static inline double lane_pair_sum(const lane_pair acc)
 {
     double lanes[2];
     memcpy(lanes, &acc, sizeof lanes);
     return lanes[0] + lanes[1];
+}
+
+/* the larger of norm and each lane, the first lane first (norm = v > norm ? v : norm, lane by
+   lane) */
+static inline double lane_pair_max(const lane_pair acc, double norm)
+{
+    double lanes[2];
+    memcpy(lanes, &acc, sizeof lanes);
+    norm = lanes[0] > norm ? lanes[0] : norm;
+    return lanes[1] > norm ? lanes[1] : norm;
 }
 
 static inline void lane_pair_store(double *a, const lane_pair acc) /* a[0], a[1] */
@@ -66,6 +99,17 @@ static inline lane_pair lane_pair_load(const MODELGEN_SCALAR *a) /* a[0], a[1] *
     lanes.lane[0] = a[0];
     lanes.lane[1] = a[1];
     return lanes;
+}
+
+static inline lane_pair lane_pair_load_aligned(const MODELGEN_SCALAR *a) /* a[0], a[1] */
+{
+    return lane_pair_load(a);
+}
+
+static inline size_t lane_pair_offset(const MODELGEN_SCALAR *a) /* no alignment needed: 0 */
+{
+    (void)a;
+    return 0;
 }
 
 static inline lane_pair lane_pair_of(const MODELGEN_SCALAR a, const MODELGEN_SCALAR b)
@@ -93,9 +137,23 @@ static inline lane_pair lane_pair_add_product(const lane_pair acc, const lane_pa
     return lanes;
 }
 
+static inline lane_pair lane_pair_add(const lane_pair acc, const lane_pair a)
+{
+    lane_pair lanes;
+    lanes.lane[0] = acc.lane[0] + a.lane[0];
+    lanes.lane[1] = acc.lane[1] + a.lane[1];
+    return lanes;
+}
+
 static inline MODELGEN_SCALAR lane_pair_sum(const lane_pair acc)
 {
     return acc.lane[0] + acc.lane[1];
+}
+
+static inline MODELGEN_SCALAR lane_pair_max(const lane_pair acc, MODELGEN_SCALAR norm)
+{
+    norm = acc.lane[0] > norm ? acc.lane[0] : norm;
+    return acc.lane[1] > norm ? acc.lane[1] : norm;
 }
 
 static inline void lane_pair_store(MODELGEN_SCALAR *a, const lane_pair acc) /* a[0], a[1] */

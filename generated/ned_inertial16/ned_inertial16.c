@@ -360,46 +360,70 @@ static const signed char balance_exponent[NED_INERTIAL16_N_STATES] = { -2, -2, -
    power of two.  A plan on it that needs a doubling is retaken on rebalanced_norm. */
 static ned_inertial16_scalar balanced_norm(const ned_inertial16_matrices *restrict m)
 {
-    ned_inertial16_scalar v, norm = 0.0;
-    v = fabs(m->F[0]) + fabs(m->F[1]) * 2.0 + fabs(m->F[2]) * 8192.0 + fabs(m->F[3]) * 4.0 +
-            fabs(m->F[4]) * 3.637978807091713e-12 + fabs(m->F[5]) * 3.637978807091713e-12 +
-            fabs(m->F[6]) * 3.637978807091713e-12 + fabs(m->F[7]) * 3.637978807091713e-12 +
-            fabs(m->F[8]) * 3.637978807091713e-12 + fabs(m->F[9]) * 3.637978807091713e-12;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[10]) + fabs(m->F[11]) * 2.0 + fabs(m->F[12]) * 4096.0 + fabs(m->F[13]) *
-            3.637978807091713e-12 + fabs(m->F[14]) * 3.637978807091713e-12 + fabs(m->F[15]) *
-            3.637978807091713e-12 + fabs(m->F[16]) * 3.637978807091713e-12 + fabs(m->F[17]) *
-            3.637978807091713e-12 + fabs(m->F[18]) * 3.637978807091713e-12;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[19]) * 0.5 + fabs(m->F[20]) * 0.5 + fabs(m->F[21]) * 4096.0 + fabs(m->F[22]) * 2.0
-            + fabs(m->F[23]) * 1.8189894035458565e-12 + fabs(m->F[24]) * 1.8189894035458565e-12 +
-            fabs(m->F[25]) * 1.8189894035458565e-12 + fabs(m->F[26]) * 1.8189894035458565e-12 +
-            fabs(m->F[27]) * 1.8189894035458565e-12 + fabs(m->F[28]) * 1.8189894035458565e-12;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[29]) * 0.000244140625 + fabs(m->F[30]) * 0.00048828125 + fabs(m->F[31]) +
-            fabs(m->F[32]) * 2.0 + fabs(m->F[33]) * 0.0009765625 + fabs(m->F[34]) *
-            8.881784197001252e-16 + fabs(m->F[35]) * 8.881784197001252e-16 + fabs(m->F[36]) *
-            0.0009765625;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[37]) * 0.0001220703125 + fabs(m->F[38]) * 0.000244140625 + fabs(m->F[39]) * 0.5 +
-            fabs(m->F[40]) + fabs(m->F[41]) * 0.00048828125 + fabs(m->F[42]) * 4.440892098500626e-16
-            + fabs(m->F[43]) * 4.440892098500626e-16 + fabs(m->F[44]) * 0.00048828125;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[45]) * 1024.0;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[46]) * 1.862645149230957e-09 + fabs(m->F[47]) * 9.094947017729282e-13;
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[48]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[49]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[50]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[51]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[52]);
-    norm = v > norm ? v : norm;
-    v = fabs(m->F[53]);
+    ned_inertial16_scalar norm = 0.0;
+    lane_pair lanes;
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[0]), fabs(m->F[19])), lane_pair_of(1.0, 0.5));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[1]), fabs(m->F[20])),
+            lane_pair_of(2.0, 0.5));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[2]), fabs(m->F[21])),
+            lane_pair_of(8192.0, 4096.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[3]), fabs(m->F[22])),
+            lane_pair_of(4.0, 2.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[4]), fabs(m->F[23])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[5]), fabs(m->F[24])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[6]), fabs(m->F[25])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[7]), fabs(m->F[26])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[8]), fabs(m->F[27])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[9]), fabs(m->F[28])),
+            lane_pair_of(3.637978807091713e-12, 1.8189894035458565e-12));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[10]), fabs(m->F[29])), lane_pair_of(1.0,
+            0.000244140625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[11]), fabs(m->F[30])),
+            lane_pair_of(2.0, 0.00048828125));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[12]), fabs(m->F[31])),
+            lane_pair_of(4096.0, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[13]), fabs(m->F[32])),
+            lane_pair_of(3.637978807091713e-12, 2.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[14]), fabs(m->F[33])),
+            lane_pair_of(3.637978807091713e-12, 0.0009765625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[15]), fabs(m->F[34])),
+            lane_pair_of(3.637978807091713e-12, 8.881784197001252e-16));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[16]), fabs(m->F[35])),
+            lane_pair_of(3.637978807091713e-12, 8.881784197001252e-16));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[17]), fabs(m->F[36])),
+            lane_pair_of(3.637978807091713e-12, 0.0009765625));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[18]), 0.0),
+            lane_pair_of(3.637978807091713e-12, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[37]), fabs(m->F[46])),
+            lane_pair_of(0.0001220703125, 1.862645149230957e-09));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[38]), fabs(m->F[47])),
+            lane_pair_of(0.000244140625, 9.094947017729282e-13));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[39]), 0.0), lane_pair_of(0.5, 1.0));
+    lanes = lane_pair_add(lanes, lane_pair_of(fabs(m->F[40]), 0.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[41]), 0.0),
+            lane_pair_of(0.00048828125, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[42]), 0.0),
+            lane_pair_of(4.440892098500626e-16, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[43]), 0.0),
+            lane_pair_of(4.440892098500626e-16, 1.0));
+    lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[44]), 0.0),
+            lane_pair_of(0.00048828125, 1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_product(lane_pair_of(fabs(m->F[45]), fabs(m->F[48])), lane_pair_of(1024.0,
+            1.0));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[49]), fabs(m->F[50]));
+    norm = lane_pair_max(lanes, norm);
+    lanes = lane_pair_of(fabs(m->F[51]), fabs(m->F[52]));
+    norm = lane_pair_max(lanes, norm);
+    const ned_inertial16_scalar v = fabs(m->F[53]);
     norm = v > norm ? v : norm;
     return norm;
 }
@@ -410,9 +434,12 @@ static ned_inertial16_scalar balanced_norm(const ned_inertial16_matrices *restri
            balancing
    in powers of two, starting from the fixed D (at the check operating point one sweep finds it a
            fixed
-   point) and stopped at a fixed point; the sums in the reference's order (row by row). */
-static ned_inertial16_scalar rebalanced_norm(const ned_inertial16_matrices *restrict m,
-        ned_inertial16_discretize_scratch *restrict w)
+   point) and stopped at a fixed point; the sums in the reference's order (row by row).
+   Not inlined: it runs only when a doubling is at stake, and inlined, gcc -O2 would keep
+   balanced_norm's |F_ij| on the stack for it on every call (bench/bench_cycle.py: 130
+   instructions at 18 states). */
+NED_INERTIAL16_BLOCK ned_inertial16_scalar rebalanced_norm(const ned_inertial16_matrices *restrict
+        m, ned_inertial16_discretize_scratch *restrict w)
 {
     ned_inertial16_scalar v, norm = 0.0;
     signed char exponent[NED_INERTIAL16_N_STATES]; /* within [-40, 40] */
@@ -740,683 +767,1279 @@ static int taylor_plan(const ned_inertial16_scalar norm, const ned_inertial16_sc
 NED_INERTIAL16_BLOCK void horner_input(const ned_inertial16_matrices *restrict m,
         ned_inertial16_discretize_scratch *restrict w, const ned_inertial16_scalar h)
 {
-    w->fh[0] = m->F[0]*h;
-    w->fh[1] = m->F[1]*h;
-    w->fh[2] = m->F[2]*h;
-    w->fh[3] = m->F[3]*h;
-    w->fh[4] = m->F[4]*h;
-    w->fh[5] = m->F[5]*h;
-    w->fh[6] = m->F[6]*h;
-    w->fh[7] = m->F[7]*h;
-    w->fh[8] = m->F[8]*h;
-    w->fh[9] = m->F[9]*h;
-    w->fh[10] = m->F[10]*h;
-    w->fh[11] = m->F[11]*h;
-    w->fh[12] = m->F[12]*h;
-    w->fh[13] = m->F[13]*h;
-    w->fh[14] = m->F[14]*h;
-    w->fh[15] = m->F[15]*h;
-    w->fh[16] = m->F[16]*h;
-    w->fh[17] = m->F[17]*h;
-    w->fh[18] = m->F[18]*h;
-    w->fh[19] = m->F[19]*h;
-    w->fh[20] = m->F[20]*h;
-    w->fh[21] = m->F[21]*h;
-    w->fh[22] = m->F[22]*h;
-    w->fh[23] = m->F[23]*h;
-    w->fh[24] = m->F[24]*h;
-    w->fh[25] = m->F[25]*h;
-    w->fh[26] = m->F[26]*h;
-    w->fh[27] = m->F[27]*h;
-    w->fh[28] = m->F[28]*h;
-    w->fh[29] = m->F[29]*h;
-    w->fh[30] = m->F[30]*h;
-    w->fh[31] = m->F[31]*h;
-    w->fh[32] = m->F[32]*h;
-    w->fh[33] = m->F[33]*h;
-    w->fh[34] = m->F[34]*h;
-    w->fh[35] = m->F[35]*h;
-    w->fh[36] = m->F[36]*h;
-    w->fh[37] = m->F[37]*h;
-    w->fh[38] = m->F[38]*h;
-    w->fh[39] = m->F[39]*h;
-    w->fh[40] = m->F[40]*h;
-    w->fh[41] = m->F[41]*h;
-    w->fh[42] = m->F[42]*h;
-    w->fh[43] = m->F[43]*h;
-    w->fh[44] = m->F[44]*h;
-    w->fh[45] = m->F[45]*h;
-    w->fh[46] = m->F[46]*h;
-    w->fh[47] = m->F[47]*h;
-    w->fh[48] = m->F[48]*h;
-    w->fh[49] = m->F[49]*h;
-    w->fh[50] = m->F[50]*h;
-    w->fh[51] = m->F[51]*h;
-    w->fh[52] = m->F[52]*h;
-    w->fh[53] = m->F[53]*h;
+    ned_inertial16_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
+    lane_pair_store(&fh_pairs[0], lane_pair_of(m->F[0]*h, m->F[0]*h));
+    lane_pair_store(&fh_pairs[2], lane_pair_of(m->F[1]*h, m->F[1]*h));
+    lane_pair_store(&fh_pairs[4], lane_pair_of(m->F[2]*h, m->F[2]*h));
+    lane_pair_store(&fh_pairs[6], lane_pair_of(m->F[3]*h, m->F[3]*h));
+    lane_pair_store(&fh_pairs[8], lane_pair_of(m->F[4]*h, m->F[4]*h));
+    lane_pair_store(&fh_pairs[10], lane_pair_of(m->F[5]*h, m->F[5]*h));
+    lane_pair_store(&fh_pairs[12], lane_pair_of(m->F[6]*h, m->F[6]*h));
+    lane_pair_store(&fh_pairs[14], lane_pair_of(m->F[7]*h, m->F[7]*h));
+    lane_pair_store(&fh_pairs[16], lane_pair_of(m->F[8]*h, m->F[8]*h));
+    lane_pair_store(&fh_pairs[18], lane_pair_of(m->F[9]*h, m->F[9]*h));
+    lane_pair_store(&fh_pairs[20], lane_pair_of(m->F[10]*h, m->F[10]*h));
+    lane_pair_store(&fh_pairs[22], lane_pair_of(m->F[11]*h, m->F[11]*h));
+    lane_pair_store(&fh_pairs[24], lane_pair_of(m->F[12]*h, m->F[12]*h));
+    lane_pair_store(&fh_pairs[26], lane_pair_of(m->F[13]*h, m->F[13]*h));
+    lane_pair_store(&fh_pairs[28], lane_pair_of(m->F[14]*h, m->F[14]*h));
+    lane_pair_store(&fh_pairs[30], lane_pair_of(m->F[15]*h, m->F[15]*h));
+    lane_pair_store(&fh_pairs[32], lane_pair_of(m->F[16]*h, m->F[16]*h));
+    lane_pair_store(&fh_pairs[34], lane_pair_of(m->F[17]*h, m->F[17]*h));
+    lane_pair_store(&fh_pairs[36], lane_pair_of(m->F[18]*h, m->F[18]*h));
+    lane_pair_store(&fh_pairs[38], lane_pair_of(m->F[19]*h, m->F[19]*h));
+    lane_pair_store(&fh_pairs[40], lane_pair_of(m->F[20]*h, m->F[20]*h));
+    lane_pair_store(&fh_pairs[42], lane_pair_of(m->F[21]*h, m->F[21]*h));
+    lane_pair_store(&fh_pairs[44], lane_pair_of(m->F[22]*h, m->F[22]*h));
+    lane_pair_store(&fh_pairs[46], lane_pair_of(m->F[23]*h, m->F[23]*h));
+    lane_pair_store(&fh_pairs[48], lane_pair_of(m->F[24]*h, m->F[24]*h));
+    lane_pair_store(&fh_pairs[50], lane_pair_of(m->F[25]*h, m->F[25]*h));
+    lane_pair_store(&fh_pairs[52], lane_pair_of(m->F[26]*h, m->F[26]*h));
+    lane_pair_store(&fh_pairs[54], lane_pair_of(m->F[27]*h, m->F[27]*h));
+    lane_pair_store(&fh_pairs[56], lane_pair_of(m->F[28]*h, m->F[28]*h));
+    lane_pair_store(&fh_pairs[58], lane_pair_of(m->F[29]*h, m->F[29]*h));
+    lane_pair_store(&fh_pairs[60], lane_pair_of(m->F[30]*h, m->F[30]*h));
+    lane_pair_store(&fh_pairs[62], lane_pair_of(m->F[31]*h, m->F[31]*h));
+    lane_pair_store(&fh_pairs[64], lane_pair_of(m->F[32]*h, m->F[32]*h));
+    lane_pair_store(&fh_pairs[66], lane_pair_of(m->F[33]*h, m->F[33]*h));
+    lane_pair_store(&fh_pairs[68], lane_pair_of(m->F[34]*h, m->F[34]*h));
+    lane_pair_store(&fh_pairs[70], lane_pair_of(m->F[35]*h, m->F[35]*h));
+    lane_pair_store(&fh_pairs[72], lane_pair_of(m->F[36]*h, m->F[36]*h));
+    lane_pair_store(&fh_pairs[74], lane_pair_of(m->F[37]*h, m->F[37]*h));
+    lane_pair_store(&fh_pairs[76], lane_pair_of(m->F[38]*h, m->F[38]*h));
+    lane_pair_store(&fh_pairs[78], lane_pair_of(m->F[39]*h, m->F[39]*h));
+    lane_pair_store(&fh_pairs[80], lane_pair_of(m->F[40]*h, m->F[40]*h));
+    lane_pair_store(&fh_pairs[82], lane_pair_of(m->F[41]*h, m->F[41]*h));
+    lane_pair_store(&fh_pairs[84], lane_pair_of(m->F[42]*h, m->F[42]*h));
+    lane_pair_store(&fh_pairs[86], lane_pair_of(m->F[43]*h, m->F[43]*h));
+    lane_pair_store(&fh_pairs[88], lane_pair_of(m->F[44]*h, m->F[44]*h));
+    lane_pair_store(&fh_pairs[90], lane_pair_of(m->F[45]*h, m->F[45]*h));
+    lane_pair_store(&fh_pairs[92], lane_pair_of(m->F[46]*h, m->F[46]*h));
+    lane_pair_store(&fh_pairs[94], lane_pair_of(m->F[47]*h, m->F[47]*h));
+    lane_pair_store(&fh_pairs[96], lane_pair_of(m->F[48]*h, m->F[48]*h));
+    lane_pair_store(&fh_pairs[98], lane_pair_of(m->F[49]*h, m->F[49]*h));
+    lane_pair_store(&fh_pairs[100], lane_pair_of(m->F[50]*h, m->F[50]*h));
+    lane_pair_store(&fh_pairs[102], lane_pair_of(m->F[51]*h, m->F[51]*h));
+    lane_pair_store(&fh_pairs[104], lane_pair_of(m->F[52]*h, m->F[52]*h));
+    lane_pair_store(&fh_pairs[106], lane_pair_of(m->F[53]*h, m->F[53]*h));
 }
 
 NED_INERTIAL16_BLOCK void horner_level_1_into_S(ned_inertial16_discretize_scratch *restrict w, const
         ned_inertial16_scalar c_out, const ned_inertial16_scalar c_in)
 {
+    const ned_inertial16_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     w->S[0] = c_out;
-    w->S[1] = w->fh[0]*c_in;
-    w->S[2] = w->fh[1]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[0], fh_pairs[2]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[1], pair);
+    }
     w->S[3] = 0;
-    w->S[4] = w->fh[2]*c_in;
-    w->S[5] = w->fh[3]*c_in;
-    w->S[6] = w->fh[7]*c_in;
-    w->S[7] = w->fh[8]*c_in;
-    w->S[8] = w->fh[9]*c_in;
-    w->S[9] = 0;
-    w->S[10] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[4], fh_pairs[6]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[14], fh_pairs[16]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[6], pair);
+    }
+    w->S[8] = fh_pairs[18]*c_in;
+    lane_pair_store(&w->S[9], lane_pair_of(0, 0));
     w->S[11] = 0;
-    w->S[12] = w->fh[10]*c_in;
+    w->S[12] = fh_pairs[20]*c_in;
     w->S[13] = c_out;
-    w->S[14] = w->fh[11]*c_in;
-    w->S[15] = w->fh[12]*c_in;
-    w->S[16] = 0;
-    w->S[17] = 0;
-    w->S[18] = w->fh[16]*c_in;
-    w->S[19] = w->fh[17]*c_in;
-    w->S[20] = w->fh[18]*c_in;
-    w->S[21] = 0;
-    w->S[22] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[22], fh_pairs[24]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[14], pair);
+    }
+    lane_pair_store(&w->S[16], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[32], fh_pairs[34]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[18], pair);
+    }
+    w->S[20] = fh_pairs[36]*c_in;
+    lane_pair_store(&w->S[21], lane_pair_of(0, 0));
     w->S[23] = 0;
-    w->S[24] = w->fh[19]*c_in;
-    w->S[25] = w->fh[20]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[38], fh_pairs[40]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[24], pair);
+    }
     w->S[26] = c_out;
     w->S[27] = 0;
-    w->S[28] = w->fh[21]*c_in;
-    w->S[29] = w->fh[22]*c_in;
-    w->S[30] = w->fh[26]*c_in;
-    w->S[31] = w->fh[27]*c_in;
-    w->S[32] = w->fh[28]*c_in;
-    w->S[33] = 0;
-    w->S[34] = 0;
-    w->S[35] = 0;
-    w->S[36] = 0;
-    w->S[37] = w->fh[29]*c_in;
-    w->S[38] = w->fh[30]*c_in;
-    w->S[39] = c_out + w->fh[31]*c_in;
-    w->S[40] = w->fh[32]*c_in;
-    w->S[41] = w->fh[33]*c_in;
-    w->S[42] = 0;
-    w->S[43] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[42], fh_pairs[44]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[52], fh_pairs[54]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[30], pair);
+    }
+    w->S[32] = fh_pairs[56]*c_in;
+    lane_pair_store(&w->S[33], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[35], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[58], fh_pairs[60]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[37], pair);
+    }
+    w->S[39] = c_out + fh_pairs[62]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[64], fh_pairs[66]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[40], pair);
+    }
+    lane_pair_store(&w->S[42], lane_pair_of(0, 0));
     w->S[44] = 0;
-    w->S[45] = w->fh[34]*c_in;
-    w->S[46] = w->fh[35]*c_in;
-    w->S[47] = w->fh[36]*c_in;
-    w->S[48] = w->fh[37]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[68], fh_pairs[70]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[45], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[72], fh_pairs[74]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[47], pair);
+    }
     w->S[49] = 0;
-    w->S[50] = w->fh[38]*c_in;
-    w->S[51] = w->fh[39]*c_in;
-    w->S[52] = c_out + w->fh[40]*c_in;
-    w->S[53] = w->fh[41]*c_in;
-    w->S[54] = 0;
-    w->S[55] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[76], fh_pairs[78]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[50], pair);
+    }
+    w->S[52] = c_out + fh_pairs[80]*c_in;
+    w->S[53] = fh_pairs[82]*c_in;
+    lane_pair_store(&w->S[54], lane_pair_of(0, 0));
     w->S[56] = 0;
-    w->S[57] = w->fh[42]*c_in;
-    w->S[58] = w->fh[43]*c_in;
-    w->S[59] = w->fh[44]*c_in;
-    w->S[60] = 0;
-    w->S[61] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[84], fh_pairs[86]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[57], pair);
+    }
+    w->S[59] = fh_pairs[88]*c_in;
+    lane_pair_store(&w->S[60], lane_pair_of(0, 0));
     w->S[62] = 0;
-    w->S[63] = w->fh[45]*c_in;
+    w->S[63] = fh_pairs[90]*c_in;
     w->S[64] = 0;
     w->S[65] = c_out;
-    w->S[66] = 0;
-    w->S[67] = 0;
-    w->S[68] = 0;
-    w->S[69] = 0;
-    w->S[70] = 0;
-    w->S[71] = 0;
-    w->S[72] = 0;
-    w->S[73] = 0;
-    w->S[74] = 0;
-    w->S[75] = 0;
-    w->S[76] = w->fh[46]*c_in;
-    w->S[77] = w->fh[47]*c_in;
-    w->S[78] = 0;
-    w->S[79] = 0;
-    w->S[80] = 0;
-    w->S[81] = 0;
-    w->S[82] = 0;
-    w->S[83] = 0;
-    w->S[84] = c_out + w->fh[48]*c_in;
-    w->S[85] = c_out + w->fh[49]*c_in;
-    w->S[86] = c_out + w->fh[50]*c_in;
-    w->S[87] = c_out + w->fh[51]*c_in;
-    w->S[88] = c_out + w->fh[52]*c_in;
-    w->S[89] = c_out + w->fh[53]*c_in;
-    w->S[90] = w->fh[4]*c_in;
-    w->S[91] = w->fh[5]*c_in;
-    w->S[92] = w->fh[6]*c_in;
-    w->S[93] = w->fh[13]*c_in;
-    w->S[94] = w->fh[14]*c_in;
-    w->S[95] = w->fh[15]*c_in;
-    w->S[96] = w->fh[23]*c_in;
-    w->S[97] = w->fh[24]*c_in;
-    w->S[98] = w->fh[25]*c_in;
-    w->S[99] = 0;
-    w->S[100] = 0;
-    w->S[101] = 0;
-    w->S[102] = 0;
-    w->S[103] = 0;
-    w->S[104] = 0;
-    w->S[105] = 0;
-    w->S[106] = 0;
+    lane_pair_store(&w->S[66], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[68], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[70], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[72], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[74], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[92], fh_pairs[94]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[76], pair);
+    }
+    lane_pair_store(&w->S[78], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[80], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[82], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[96], fh_pairs[98]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[100], fh_pairs[102]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[104], fh_pairs[106]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[88], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[8], fh_pairs[10]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[90], pair);
+    }
+    w->S[92] = fh_pairs[12]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[26], fh_pairs[28]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[93], pair);
+    }
+    w->S[95] = fh_pairs[30]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[46], fh_pairs[48]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->S[96], pair);
+    }
+    w->S[98] = fh_pairs[50]*c_in;
+    lane_pair_store(&w->S[99], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[101], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[103], lane_pair_of(0, 0));
+    lane_pair_store(&w->S[105], lane_pair_of(0, 0));
     w->S[107] = 0;
     w->S[108] = c_out;
-    w->S[109] = 0;
-    w->S[110] = 0;
+    lane_pair_store(&w->S[109], lane_pair_of(0, 0));
     w->S[111] = 0;
 }
 
 NED_INERTIAL16_BLOCK void horner_level_1_into_term(ned_inertial16_discretize_scratch *restrict w,
         const ned_inertial16_scalar c_out, const ned_inertial16_scalar c_in)
 {
+    const ned_inertial16_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     w->term[1][0] = c_out;
-    w->term[1][1] = w->fh[0]*c_in;
-    w->term[1][2] = w->fh[1]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[0], fh_pairs[2]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][1], pair);
+    }
     w->term[1][3] = 0;
-    w->term[1][4] = w->fh[2]*c_in;
-    w->term[1][5] = w->fh[3]*c_in;
-    w->term[1][6] = w->fh[7]*c_in;
-    w->term[1][7] = w->fh[8]*c_in;
-    w->term[1][8] = w->fh[9]*c_in;
-    w->term[1][9] = 0;
-    w->term[1][10] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[4], fh_pairs[6]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[14], fh_pairs[16]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][6], pair);
+    }
+    w->term[1][8] = fh_pairs[18]*c_in;
+    lane_pair_store(&w->term[1][9], lane_pair_of(0, 0));
     w->term[1][11] = 0;
-    w->term[1][12] = w->fh[10]*c_in;
+    w->term[1][12] = fh_pairs[20]*c_in;
     w->term[1][13] = c_out;
-    w->term[1][14] = w->fh[11]*c_in;
-    w->term[1][15] = w->fh[12]*c_in;
-    w->term[1][16] = 0;
-    w->term[1][17] = 0;
-    w->term[1][18] = w->fh[16]*c_in;
-    w->term[1][19] = w->fh[17]*c_in;
-    w->term[1][20] = w->fh[18]*c_in;
-    w->term[1][21] = 0;
-    w->term[1][22] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[22], fh_pairs[24]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][14], pair);
+    }
+    lane_pair_store(&w->term[1][16], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[32], fh_pairs[34]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][18], pair);
+    }
+    w->term[1][20] = fh_pairs[36]*c_in;
+    lane_pair_store(&w->term[1][21], lane_pair_of(0, 0));
     w->term[1][23] = 0;
-    w->term[1][24] = w->fh[19]*c_in;
-    w->term[1][25] = w->fh[20]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[38], fh_pairs[40]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][24], pair);
+    }
     w->term[1][26] = c_out;
     w->term[1][27] = 0;
-    w->term[1][28] = w->fh[21]*c_in;
-    w->term[1][29] = w->fh[22]*c_in;
-    w->term[1][30] = w->fh[26]*c_in;
-    w->term[1][31] = w->fh[27]*c_in;
-    w->term[1][32] = w->fh[28]*c_in;
-    w->term[1][33] = 0;
-    w->term[1][34] = 0;
-    w->term[1][35] = 0;
-    w->term[1][36] = 0;
-    w->term[1][37] = w->fh[29]*c_in;
-    w->term[1][38] = w->fh[30]*c_in;
-    w->term[1][39] = c_out + w->fh[31]*c_in;
-    w->term[1][40] = w->fh[32]*c_in;
-    w->term[1][41] = w->fh[33]*c_in;
-    w->term[1][42] = 0;
-    w->term[1][43] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[42], fh_pairs[44]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[52], fh_pairs[54]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][30], pair);
+    }
+    w->term[1][32] = fh_pairs[56]*c_in;
+    lane_pair_store(&w->term[1][33], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][35], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[58], fh_pairs[60]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][37], pair);
+    }
+    w->term[1][39] = c_out + fh_pairs[62]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[64], fh_pairs[66]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][40], pair);
+    }
+    lane_pair_store(&w->term[1][42], lane_pair_of(0, 0));
     w->term[1][44] = 0;
-    w->term[1][45] = w->fh[34]*c_in;
-    w->term[1][46] = w->fh[35]*c_in;
-    w->term[1][47] = w->fh[36]*c_in;
-    w->term[1][48] = w->fh[37]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[68], fh_pairs[70]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][45], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[72], fh_pairs[74]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][47], pair);
+    }
     w->term[1][49] = 0;
-    w->term[1][50] = w->fh[38]*c_in;
-    w->term[1][51] = w->fh[39]*c_in;
-    w->term[1][52] = c_out + w->fh[40]*c_in;
-    w->term[1][53] = w->fh[41]*c_in;
-    w->term[1][54] = 0;
-    w->term[1][55] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[76], fh_pairs[78]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][50], pair);
+    }
+    w->term[1][52] = c_out + fh_pairs[80]*c_in;
+    w->term[1][53] = fh_pairs[82]*c_in;
+    lane_pair_store(&w->term[1][54], lane_pair_of(0, 0));
     w->term[1][56] = 0;
-    w->term[1][57] = w->fh[42]*c_in;
-    w->term[1][58] = w->fh[43]*c_in;
-    w->term[1][59] = w->fh[44]*c_in;
-    w->term[1][60] = 0;
-    w->term[1][61] = 0;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[84], fh_pairs[86]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][57], pair);
+    }
+    w->term[1][59] = fh_pairs[88]*c_in;
+    lane_pair_store(&w->term[1][60], lane_pair_of(0, 0));
     w->term[1][62] = 0;
-    w->term[1][63] = w->fh[45]*c_in;
+    w->term[1][63] = fh_pairs[90]*c_in;
     w->term[1][64] = 0;
     w->term[1][65] = c_out;
-    w->term[1][66] = 0;
-    w->term[1][67] = 0;
-    w->term[1][68] = 0;
-    w->term[1][69] = 0;
-    w->term[1][70] = 0;
-    w->term[1][71] = 0;
-    w->term[1][72] = 0;
-    w->term[1][73] = 0;
-    w->term[1][74] = 0;
-    w->term[1][75] = 0;
-    w->term[1][76] = w->fh[46]*c_in;
-    w->term[1][77] = w->fh[47]*c_in;
-    w->term[1][78] = 0;
-    w->term[1][79] = 0;
-    w->term[1][80] = 0;
-    w->term[1][81] = 0;
-    w->term[1][82] = 0;
-    w->term[1][83] = 0;
-    w->term[1][84] = c_out + w->fh[48]*c_in;
-    w->term[1][85] = c_out + w->fh[49]*c_in;
-    w->term[1][86] = c_out + w->fh[50]*c_in;
-    w->term[1][87] = c_out + w->fh[51]*c_in;
-    w->term[1][88] = c_out + w->fh[52]*c_in;
-    w->term[1][89] = c_out + w->fh[53]*c_in;
-    w->term[1][90] = w->fh[4]*c_in;
-    w->term[1][91] = w->fh[5]*c_in;
-    w->term[1][92] = w->fh[6]*c_in;
-    w->term[1][93] = w->fh[13]*c_in;
-    w->term[1][94] = w->fh[14]*c_in;
-    w->term[1][95] = w->fh[15]*c_in;
-    w->term[1][96] = w->fh[23]*c_in;
-    w->term[1][97] = w->fh[24]*c_in;
-    w->term[1][98] = w->fh[25]*c_in;
-    w->term[1][99] = 0;
-    w->term[1][100] = 0;
-    w->term[1][101] = 0;
-    w->term[1][102] = 0;
-    w->term[1][103] = 0;
-    w->term[1][104] = 0;
-    w->term[1][105] = 0;
-    w->term[1][106] = 0;
+    lane_pair_store(&w->term[1][66], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][68], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][70], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][72], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][74], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[92], fh_pairs[94]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][76], pair);
+    }
+    lane_pair_store(&w->term[1][78], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][80], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][82], lane_pair_of(0, 0));
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[96], fh_pairs[98]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[100], fh_pairs[102]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[104], fh_pairs[106]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][88], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[8], fh_pairs[10]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][90], pair);
+    }
+    w->term[1][92] = fh_pairs[12]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[26], fh_pairs[28]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][93], pair);
+    }
+    w->term[1][95] = fh_pairs[30]*c_in;
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[46], fh_pairs[48]),
+                lane_pair_of(c_in, c_in));
+        lane_pair_store(&w->term[1][96], pair);
+    }
+    w->term[1][98] = fh_pairs[50]*c_in;
+    lane_pair_store(&w->term[1][99], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][101], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][103], lane_pair_of(0, 0));
+    lane_pair_store(&w->term[1][105], lane_pair_of(0, 0));
     w->term[1][107] = 0;
     w->term[1][108] = c_out;
-    w->term[1][109] = 0;
-    w->term[1][110] = 0;
+    lane_pair_store(&w->term[1][109], lane_pair_of(0, 0));
     w->term[1][111] = 0;
 }
 
 NED_INERTIAL16_BLOCK void horner_saturated_into_S(ned_inertial16_discretize_scratch *restrict w,
         const ned_inertial16_scalar c_out)
 {
+    const ned_inertial16_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 12; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][12+k] + w->fh[1]*w->term[1][24+k] + w->fh[2]*w->term[1][48+k]
-                + w->fh[3]*w->term[1][60+k];
-        w->S[12+k] = w->fh[10]*w->term[1][k] + w->fh[11]*w->term[1][24+k] +
-                w->fh[12]*w->term[1][36+k];
-        w->S[24+k] = w->fh[19]*w->term[1][k] + w->fh[20]*w->term[1][12+k] +
-                w->fh[21]*w->term[1][48+k] + w->fh[22]*w->term[1][60+k];
-        w->S[36+k] = w->fh[29]*w->term[1][12+k] + w->fh[30]*w->term[1][24+k] +
-                w->fh[31]*w->term[1][36+k] + w->fh[32]*w->term[1][48+k] +
-                w->fh[33]*w->term[1][60+k];
-        w->S[48+k] = w->fh[37]*w->term[1][k] + w->fh[38]*w->term[1][24+k] +
-                w->fh[39]*w->term[1][36+k] + w->fh[40]*w->term[1][48+k] +
-                w->fh[41]*w->term[1][60+k];
-        w->S[60+k] = w->fh[45]*w->term[1][36+k];
+    for (k = 0; k < 12; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->term[1][12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->term[1][60+k]));
+        lane_pair_store(&w->S[k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->term[1][36+k]));
+        lane_pair_store(&w->S[12+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->term[1][12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->term[1][60+k]));
+        lane_pair_store(&w->S[24+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->term[1][12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->term[1][36+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->term[1][60+k]));
+        lane_pair_store(&w->S[36+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->term[1][36+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[82]),
+                lane_pair_load(&w->term[1][60+k]));
+        lane_pair_store(&w->S[48+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[90]),
+                lane_pair_load(&w->term[1][36+k]));
+        lane_pair_store(&w->S[60+k], lanes);
     }
     w->S[0] = w->S[0] + c_out;
-    w->S[6] = w->S[6] + w->fh[7]*w->term[1][84];
-    w->S[7] = w->S[7] + w->fh[8]*w->term[1][85];
-    w->S[8] = w->S[8] + w->fh[9]*w->term[1][86];
+    w->S[6] = w->S[6] + fh_pairs[14]*w->term[1][84];
+    w->S[7] = w->S[7] + fh_pairs[16]*w->term[1][85];
+    w->S[8] = w->S[8] + fh_pairs[18]*w->term[1][86];
     w->S[13] = w->S[13] + c_out;
-    w->S[18] = w->S[18] + w->fh[16]*w->term[1][84];
-    w->S[19] = w->S[19] + w->fh[17]*w->term[1][85];
-    w->S[20] = w->S[20] + w->fh[18]*w->term[1][86];
+    w->S[18] = w->S[18] + fh_pairs[32]*w->term[1][84];
+    w->S[19] = w->S[19] + fh_pairs[34]*w->term[1][85];
+    w->S[20] = w->S[20] + fh_pairs[36]*w->term[1][86];
     w->S[26] = w->S[26] + c_out;
-    w->S[30] = w->S[30] + w->fh[26]*w->term[1][84];
-    w->S[31] = w->S[31] + w->fh[27]*w->term[1][85];
-    w->S[32] = w->S[32] + w->fh[28]*w->term[1][86];
+    w->S[30] = w->S[30] + fh_pairs[52]*w->term[1][84];
+    w->S[31] = w->S[31] + fh_pairs[54]*w->term[1][85];
+    w->S[32] = w->S[32] + fh_pairs[56]*w->term[1][86];
     w->S[39] = w->S[39] + c_out;
-    w->S[45] = w->S[45] + w->fh[34]*w->term[1][87];
-    w->S[46] = w->S[46] + w->fh[35]*w->term[1][88];
-    w->S[47] = w->S[47] + w->fh[36]*w->term[1][89];
+    w->S[45] = w->S[45] + fh_pairs[68]*w->term[1][87];
+    w->S[46] = w->S[46] + fh_pairs[70]*w->term[1][88];
+    w->S[47] = w->S[47] + fh_pairs[72]*w->term[1][89];
     w->S[52] = w->S[52] + c_out;
-    w->S[57] = w->S[57] + w->fh[42]*w->term[1][87];
-    w->S[58] = w->S[58] + w->fh[43]*w->term[1][88];
-    w->S[59] = w->S[59] + w->fh[44]*w->term[1][89];
+    w->S[57] = w->S[57] + fh_pairs[84]*w->term[1][87];
+    w->S[58] = w->S[58] + fh_pairs[86]*w->term[1][88];
+    w->S[59] = w->S[59] + fh_pairs[88]*w->term[1][89];
     w->S[65] = w->S[65] + c_out;
-    w->S[84] = c_out + w->fh[48]*w->term[1][84];
-    w->S[85] = c_out + w->fh[49]*w->term[1][85];
-    w->S[86] = c_out + w->fh[50]*w->term[1][86];
-    w->S[87] = c_out + w->fh[51]*w->term[1][87];
-    w->S[88] = c_out + w->fh[52]*w->term[1][88];
-    w->S[89] = c_out + w->fh[53]*w->term[1][89];
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[96], fh_pairs[98]),
+                lane_pair_load(&w->term[1][84]));
+        lane_pair_store(&w->S[84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[100], fh_pairs[102]),
+                lane_pair_load(&w->term[1][86]));
+        lane_pair_store(&w->S[86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[104], fh_pairs[106]),
+                lane_pair_load(&w->term[1][88]));
+        lane_pair_store(&w->S[88], pair);
+    }
 }
 
 NED_INERTIAL16_BLOCK void horner_saturated_into_term(ned_inertial16_discretize_scratch *restrict w,
         const ned_inertial16_scalar c_out)
 {
+    const ned_inertial16_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 12; ++k) {
-        w->term[1][k] = w->fh[0]*w->S[12+k] + w->fh[1]*w->S[24+k] + w->fh[2]*w->S[48+k] +
-                w->fh[3]*w->S[60+k];
-        w->term[1][12+k] = w->fh[10]*w->S[k] + w->fh[11]*w->S[24+k] + w->fh[12]*w->S[36+k];
-        w->term[1][24+k] = w->fh[19]*w->S[k] + w->fh[20]*w->S[12+k] + w->fh[21]*w->S[48+k] +
-                w->fh[22]*w->S[60+k];
-        w->term[1][36+k] = w->fh[29]*w->S[12+k] + w->fh[30]*w->S[24+k] + w->fh[31]*w->S[36+k] +
-                w->fh[32]*w->S[48+k] + w->fh[33]*w->S[60+k];
-        w->term[1][48+k] = w->fh[37]*w->S[k] + w->fh[38]*w->S[24+k] + w->fh[39]*w->S[36+k] +
-                w->fh[40]*w->S[48+k] + w->fh[41]*w->S[60+k];
-        w->term[1][60+k] = w->fh[45]*w->S[36+k];
+    for (k = 0; k < 12; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->S[12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[60+k]));
+        lane_pair_store(&w->term[1][k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[36+k]));
+        lane_pair_store(&w->term[1][12+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[60+k]));
+        lane_pair_store(&w->term[1][24+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->S[12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[36+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[60+k]));
+        lane_pair_store(&w->term[1][36+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[36+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[82]),
+                lane_pair_load(&w->S[60+k]));
+        lane_pair_store(&w->term[1][48+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[90]),
+                lane_pair_load(&w->S[36+k]));
+        lane_pair_store(&w->term[1][60+k], lanes);
     }
     w->term[1][0] = w->term[1][0] + c_out;
-    w->term[1][6] = w->term[1][6] + w->fh[7]*w->S[84];
-    w->term[1][7] = w->term[1][7] + w->fh[8]*w->S[85];
-    w->term[1][8] = w->term[1][8] + w->fh[9]*w->S[86];
+    w->term[1][6] = w->term[1][6] + fh_pairs[14]*w->S[84];
+    w->term[1][7] = w->term[1][7] + fh_pairs[16]*w->S[85];
+    w->term[1][8] = w->term[1][8] + fh_pairs[18]*w->S[86];
     w->term[1][13] = w->term[1][13] + c_out;
-    w->term[1][18] = w->term[1][18] + w->fh[16]*w->S[84];
-    w->term[1][19] = w->term[1][19] + w->fh[17]*w->S[85];
-    w->term[1][20] = w->term[1][20] + w->fh[18]*w->S[86];
+    w->term[1][18] = w->term[1][18] + fh_pairs[32]*w->S[84];
+    w->term[1][19] = w->term[1][19] + fh_pairs[34]*w->S[85];
+    w->term[1][20] = w->term[1][20] + fh_pairs[36]*w->S[86];
     w->term[1][26] = w->term[1][26] + c_out;
-    w->term[1][30] = w->term[1][30] + w->fh[26]*w->S[84];
-    w->term[1][31] = w->term[1][31] + w->fh[27]*w->S[85];
-    w->term[1][32] = w->term[1][32] + w->fh[28]*w->S[86];
+    w->term[1][30] = w->term[1][30] + fh_pairs[52]*w->S[84];
+    w->term[1][31] = w->term[1][31] + fh_pairs[54]*w->S[85];
+    w->term[1][32] = w->term[1][32] + fh_pairs[56]*w->S[86];
     w->term[1][39] = w->term[1][39] + c_out;
-    w->term[1][45] = w->term[1][45] + w->fh[34]*w->S[87];
-    w->term[1][46] = w->term[1][46] + w->fh[35]*w->S[88];
-    w->term[1][47] = w->term[1][47] + w->fh[36]*w->S[89];
+    w->term[1][45] = w->term[1][45] + fh_pairs[68]*w->S[87];
+    w->term[1][46] = w->term[1][46] + fh_pairs[70]*w->S[88];
+    w->term[1][47] = w->term[1][47] + fh_pairs[72]*w->S[89];
     w->term[1][52] = w->term[1][52] + c_out;
-    w->term[1][57] = w->term[1][57] + w->fh[42]*w->S[87];
-    w->term[1][58] = w->term[1][58] + w->fh[43]*w->S[88];
-    w->term[1][59] = w->term[1][59] + w->fh[44]*w->S[89];
+    w->term[1][57] = w->term[1][57] + fh_pairs[84]*w->S[87];
+    w->term[1][58] = w->term[1][58] + fh_pairs[86]*w->S[88];
+    w->term[1][59] = w->term[1][59] + fh_pairs[88]*w->S[89];
     w->term[1][65] = w->term[1][65] + c_out;
-    w->term[1][84] = c_out + w->fh[48]*w->S[84];
-    w->term[1][85] = c_out + w->fh[49]*w->S[85];
-    w->term[1][86] = c_out + w->fh[50]*w->S[86];
-    w->term[1][87] = c_out + w->fh[51]*w->S[87];
-    w->term[1][88] = c_out + w->fh[52]*w->S[88];
-    w->term[1][89] = c_out + w->fh[53]*w->S[89];
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[96], fh_pairs[98]),
+                lane_pair_load(&w->S[84]));
+        lane_pair_store(&w->term[1][84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[100], fh_pairs[102]),
+                lane_pair_load(&w->S[86]));
+        lane_pair_store(&w->term[1][86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[104], fh_pairs[106]),
+                lane_pair_load(&w->S[88]));
+        lane_pair_store(&w->term[1][88], pair);
+    }
 }
 
 NED_INERTIAL16_BLOCK void horner_first_into_term(ned_inertial16_discretize_scratch *restrict w,
         const ned_inertial16_scalar c_out)
 {
+    const ned_inertial16_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 12; ++k) {
-        w->term[1][k] = w->fh[0]*w->S[12+k] + w->fh[1]*w->S[24+k] + w->fh[2]*w->S[48+k] +
-                w->fh[3]*w->S[60+k];
-        w->term[1][12+k] = w->fh[10]*w->S[k] + w->fh[11]*w->S[24+k] + w->fh[12]*w->S[36+k];
-        w->term[1][24+k] = w->fh[19]*w->S[k] + w->fh[20]*w->S[12+k] + w->fh[21]*w->S[48+k] +
-                w->fh[22]*w->S[60+k];
-        w->term[1][36+k] = w->fh[29]*w->S[12+k] + w->fh[30]*w->S[24+k] + w->fh[31]*w->S[36+k] +
-                w->fh[32]*w->S[48+k] + w->fh[33]*w->S[60+k];
-        w->term[1][48+k] = w->fh[37]*w->S[k] + w->fh[38]*w->S[24+k] + w->fh[39]*w->S[36+k] +
-                w->fh[40]*w->S[48+k] + w->fh[41]*w->S[60+k];
-        w->term[1][60+k] = w->fh[45]*w->S[36+k];
-        w->term[1][72+k] = w->fh[46]*w->S[48+k] + w->fh[47]*w->S[60+k];
+    for (k = 0; k < 12; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->S[12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[60+k]));
+        lane_pair_store(&w->term[1][k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[36+k]));
+        lane_pair_store(&w->term[1][12+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[60+k]));
+        lane_pair_store(&w->term[1][24+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->S[12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[36+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[60+k]));
+        lane_pair_store(&w->term[1][36+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[36+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[82]),
+                lane_pair_load(&w->S[60+k]));
+        lane_pair_store(&w->term[1][48+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[90]),
+                lane_pair_load(&w->S[36+k]));
+        lane_pair_store(&w->term[1][60+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[92]),
+                lane_pair_load(&w->S[48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->S[60+k]));
+        lane_pair_store(&w->term[1][72+k], lanes);
     }
     w->term[1][0] = w->term[1][0] + c_out;
-    w->term[1][6] = w->term[1][6] + w->fh[7]*w->S[84];
-    w->term[1][7] = w->term[1][7] + w->fh[8]*w->S[85];
-    w->term[1][8] = w->term[1][8] + w->fh[9]*w->S[86];
+    w->term[1][6] = w->term[1][6] + fh_pairs[14]*w->S[84];
+    w->term[1][7] = w->term[1][7] + fh_pairs[16]*w->S[85];
+    w->term[1][8] = w->term[1][8] + fh_pairs[18]*w->S[86];
     w->term[1][13] = w->term[1][13] + c_out;
-    w->term[1][18] = w->term[1][18] + w->fh[16]*w->S[84];
-    w->term[1][19] = w->term[1][19] + w->fh[17]*w->S[85];
-    w->term[1][20] = w->term[1][20] + w->fh[18]*w->S[86];
+    w->term[1][18] = w->term[1][18] + fh_pairs[32]*w->S[84];
+    w->term[1][19] = w->term[1][19] + fh_pairs[34]*w->S[85];
+    w->term[1][20] = w->term[1][20] + fh_pairs[36]*w->S[86];
     w->term[1][26] = w->term[1][26] + c_out;
-    w->term[1][30] = w->term[1][30] + w->fh[26]*w->S[84];
-    w->term[1][31] = w->term[1][31] + w->fh[27]*w->S[85];
-    w->term[1][32] = w->term[1][32] + w->fh[28]*w->S[86];
+    w->term[1][30] = w->term[1][30] + fh_pairs[52]*w->S[84];
+    w->term[1][31] = w->term[1][31] + fh_pairs[54]*w->S[85];
+    w->term[1][32] = w->term[1][32] + fh_pairs[56]*w->S[86];
     w->term[1][39] = w->term[1][39] + c_out;
-    w->term[1][45] = w->term[1][45] + w->fh[34]*w->S[87];
-    w->term[1][46] = w->term[1][46] + w->fh[35]*w->S[88];
-    w->term[1][47] = w->term[1][47] + w->fh[36]*w->S[89];
+    w->term[1][45] = w->term[1][45] + fh_pairs[68]*w->S[87];
+    w->term[1][46] = w->term[1][46] + fh_pairs[70]*w->S[88];
+    w->term[1][47] = w->term[1][47] + fh_pairs[72]*w->S[89];
     w->term[1][52] = w->term[1][52] + c_out;
-    w->term[1][57] = w->term[1][57] + w->fh[42]*w->S[87];
-    w->term[1][58] = w->term[1][58] + w->fh[43]*w->S[88];
-    w->term[1][59] = w->term[1][59] + w->fh[44]*w->S[89];
+    w->term[1][57] = w->term[1][57] + fh_pairs[84]*w->S[87];
+    w->term[1][58] = w->term[1][58] + fh_pairs[86]*w->S[88];
+    w->term[1][59] = w->term[1][59] + fh_pairs[88]*w->S[89];
     w->term[1][65] = w->term[1][65] + c_out;
     w->term[1][108] = c_out;
-    w->term[1][84] = c_out + w->fh[48]*w->S[84];
-    w->term[1][85] = c_out + w->fh[49]*w->S[85];
-    w->term[1][86] = c_out + w->fh[50]*w->S[86];
-    w->term[1][87] = c_out + w->fh[51]*w->S[87];
-    w->term[1][88] = c_out + w->fh[52]*w->S[88];
-    w->term[1][89] = c_out + w->fh[53]*w->S[89];
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[96], fh_pairs[98]),
+                lane_pair_load(&w->S[84]));
+        lane_pair_store(&w->term[1][84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[100], fh_pairs[102]),
+                lane_pair_load(&w->S[86]));
+        lane_pair_store(&w->term[1][86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[104], fh_pairs[106]),
+                lane_pair_load(&w->S[88]));
+        lane_pair_store(&w->term[1][88], pair);
+    }
 }
 
 NED_INERTIAL16_BLOCK void horner_last_into_S(ned_inertial16_discretize_scratch *restrict w, const
         ned_inertial16_scalar c_out)
 {
+    const ned_inertial16_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     int k;
-    for (k = 0; k < 12; ++k) {
-        w->S[k] = w->fh[0]*w->term[1][12+k] + w->fh[1]*w->term[1][24+k] + w->fh[2]*w->term[1][48+k]
-                + w->fh[3]*w->term[1][60+k];
-        w->S[12+k] = w->fh[10]*w->term[1][k] + w->fh[11]*w->term[1][24+k] +
-                w->fh[12]*w->term[1][36+k];
-        w->S[24+k] = w->fh[19]*w->term[1][k] + w->fh[20]*w->term[1][12+k] +
-                w->fh[21]*w->term[1][48+k] + w->fh[22]*w->term[1][60+k];
-        w->S[36+k] = w->fh[29]*w->term[1][12+k] + w->fh[30]*w->term[1][24+k] +
-                w->fh[31]*w->term[1][36+k] + w->fh[32]*w->term[1][48+k] +
-                w->fh[33]*w->term[1][60+k];
-        w->S[48+k] = w->fh[37]*w->term[1][k] + w->fh[38]*w->term[1][24+k] +
-                w->fh[39]*w->term[1][36+k] + w->fh[40]*w->term[1][48+k] +
-                w->fh[41]*w->term[1][60+k];
-        w->S[60+k] = w->fh[45]*w->term[1][36+k];
-        w->S[72+k] = w->fh[46]*w->term[1][48+k] + w->fh[47]*w->term[1][60+k];
+    for (k = 0; k < 12; k += 2) {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]),
+                lane_pair_load(&w->term[1][12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->term[1][60+k]));
+        lane_pair_store(&w->S[k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->term[1][36+k]));
+        lane_pair_store(&w->S[12+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->term[1][12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->term[1][60+k]));
+        lane_pair_store(&w->S[24+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[58]),
+                lane_pair_load(&w->term[1][12+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->term[1][36+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->term[1][60+k]));
+        lane_pair_store(&w->S[36+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]),
+                lane_pair_load(&w->term[1][k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->term[1][24+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->term[1][36+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[82]),
+                lane_pair_load(&w->term[1][60+k]));
+        lane_pair_store(&w->S[48+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[90]),
+                lane_pair_load(&w->term[1][36+k]));
+        lane_pair_store(&w->S[60+k], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[92]),
+                lane_pair_load(&w->term[1][48+k]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->term[1][60+k]));
+        lane_pair_store(&w->S[72+k], lanes);
     }
     w->S[0] = w->S[0] + c_out;
-    w->S[6] = w->S[6] + w->fh[7]*w->term[1][84];
-    w->S[7] = w->S[7] + w->fh[8]*w->term[1][85];
-    w->S[8] = w->S[8] + w->fh[9]*w->term[1][86];
+    w->S[6] = w->S[6] + fh_pairs[14]*w->term[1][84];
+    w->S[7] = w->S[7] + fh_pairs[16]*w->term[1][85];
+    w->S[8] = w->S[8] + fh_pairs[18]*w->term[1][86];
     w->S[13] = w->S[13] + c_out;
-    w->S[18] = w->S[18] + w->fh[16]*w->term[1][84];
-    w->S[19] = w->S[19] + w->fh[17]*w->term[1][85];
-    w->S[20] = w->S[20] + w->fh[18]*w->term[1][86];
+    w->S[18] = w->S[18] + fh_pairs[32]*w->term[1][84];
+    w->S[19] = w->S[19] + fh_pairs[34]*w->term[1][85];
+    w->S[20] = w->S[20] + fh_pairs[36]*w->term[1][86];
     w->S[26] = w->S[26] + c_out;
-    w->S[30] = w->S[30] + w->fh[26]*w->term[1][84];
-    w->S[31] = w->S[31] + w->fh[27]*w->term[1][85];
-    w->S[32] = w->S[32] + w->fh[28]*w->term[1][86];
+    w->S[30] = w->S[30] + fh_pairs[52]*w->term[1][84];
+    w->S[31] = w->S[31] + fh_pairs[54]*w->term[1][85];
+    w->S[32] = w->S[32] + fh_pairs[56]*w->term[1][86];
     w->S[39] = w->S[39] + c_out;
-    w->S[45] = w->S[45] + w->fh[34]*w->term[1][87];
-    w->S[46] = w->S[46] + w->fh[35]*w->term[1][88];
-    w->S[47] = w->S[47] + w->fh[36]*w->term[1][89];
+    w->S[45] = w->S[45] + fh_pairs[68]*w->term[1][87];
+    w->S[46] = w->S[46] + fh_pairs[70]*w->term[1][88];
+    w->S[47] = w->S[47] + fh_pairs[72]*w->term[1][89];
     w->S[52] = w->S[52] + c_out;
-    w->S[57] = w->S[57] + w->fh[42]*w->term[1][87];
-    w->S[58] = w->S[58] + w->fh[43]*w->term[1][88];
-    w->S[59] = w->S[59] + w->fh[44]*w->term[1][89];
+    w->S[57] = w->S[57] + fh_pairs[84]*w->term[1][87];
+    w->S[58] = w->S[58] + fh_pairs[86]*w->term[1][88];
+    w->S[59] = w->S[59] + fh_pairs[88]*w->term[1][89];
     w->S[65] = w->S[65] + c_out;
     w->S[108] = c_out;
-    w->S[84] = c_out + w->fh[48]*w->term[1][84];
-    w->S[85] = c_out + w->fh[49]*w->term[1][85];
-    w->S[86] = c_out + w->fh[50]*w->term[1][86];
-    w->S[87] = c_out + w->fh[51]*w->term[1][87];
-    w->S[88] = c_out + w->fh[52]*w->term[1][88];
-    w->S[89] = c_out + w->fh[53]*w->term[1][89];
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[96], fh_pairs[98]),
+                lane_pair_load(&w->term[1][84]));
+        lane_pair_store(&w->S[84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[100], fh_pairs[102]),
+                lane_pair_load(&w->term[1][86]));
+        lane_pair_store(&w->S[86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_of(c_out, c_out);
+        pair = lane_pair_add_product(pair, lane_pair_of(fh_pairs[104], fh_pairs[106]),
+                lane_pair_load(&w->term[1][88]));
+        lane_pair_store(&w->S[88], pair);
+    }
 }
 
 NED_INERTIAL16_BLOCK void horner_unit_columns(ned_inertial16_discretize_scratch *restrict w)
 {
+    const ned_inertial16_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][0], w->term[1][0]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][1], w->term[1][1]),
-                lane_pair_load(&w->fh[13]));
+                lane_pair_of(fh_pairs[26], fh_pairs[28]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][2], w->term[1][2]),
-                lane_pair_load(&w->fh[23]));
+                lane_pair_of(fh_pairs[46], fh_pairs[48]));
         lane_pair_store(&w->S[90], pair);
     }
-    w->S[92] = w->term[1][0]*w->fh[6] + w->term[1][1]*w->fh[15] + w->term[1][2]*w->fh[25];
+    w->S[92] = w->term[1][0]*fh_pairs[12] + w->term[1][1]*fh_pairs[30] + w->term[1][2]*fh_pairs[50];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][12], w->term[1][12]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][13], w->term[1][13]),
-                lane_pair_load(&w->fh[13]));
+                lane_pair_of(fh_pairs[26], fh_pairs[28]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][14], w->term[1][14]),
-                lane_pair_load(&w->fh[23]));
+                lane_pair_of(fh_pairs[46], fh_pairs[48]));
         lane_pair_store(&w->S[93], pair);
     }
-    w->S[95] = w->term[1][12]*w->fh[6] + w->term[1][13]*w->fh[15] + w->term[1][14]*w->fh[25];
+    w->S[95] = w->term[1][12]*fh_pairs[12] + w->term[1][13]*fh_pairs[30] +
+            w->term[1][14]*fh_pairs[50];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][24], w->term[1][24]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][25], w->term[1][25]),
-                lane_pair_load(&w->fh[13]));
+                lane_pair_of(fh_pairs[26], fh_pairs[28]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][26], w->term[1][26]),
-                lane_pair_load(&w->fh[23]));
+                lane_pair_of(fh_pairs[46], fh_pairs[48]));
         lane_pair_store(&w->S[96], pair);
     }
-    w->S[98] = w->term[1][24]*w->fh[6] + w->term[1][25]*w->fh[15] + w->term[1][26]*w->fh[25];
+    w->S[98] = w->term[1][24]*fh_pairs[12] + w->term[1][25]*fh_pairs[30] +
+            w->term[1][26]*fh_pairs[50];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][36], w->term[1][36]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][37], w->term[1][37]),
-                lane_pair_load(&w->fh[13]));
+                lane_pair_of(fh_pairs[26], fh_pairs[28]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][38], w->term[1][38]),
-                lane_pair_load(&w->fh[23]));
+                lane_pair_of(fh_pairs[46], fh_pairs[48]));
         lane_pair_store(&w->S[99], pair);
     }
-    w->S[101] = w->term[1][36]*w->fh[6] + w->term[1][37]*w->fh[15] + w->term[1][38]*w->fh[25];
+    w->S[101] = w->term[1][36]*fh_pairs[12] + w->term[1][37]*fh_pairs[30] +
+            w->term[1][38]*fh_pairs[50];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][48], w->term[1][48]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][49], w->term[1][49]),
-                lane_pair_load(&w->fh[13]));
+                lane_pair_of(fh_pairs[26], fh_pairs[28]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][50], w->term[1][50]),
-                lane_pair_load(&w->fh[23]));
+                lane_pair_of(fh_pairs[46], fh_pairs[48]));
         lane_pair_store(&w->S[102], pair);
     }
-    w->S[104] = w->term[1][48]*w->fh[6] + w->term[1][49]*w->fh[15] + w->term[1][50]*w->fh[25];
+    w->S[104] = w->term[1][48]*fh_pairs[12] + w->term[1][49]*fh_pairs[30] +
+            w->term[1][50]*fh_pairs[50];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][60], w->term[1][60]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][61], w->term[1][61]),
-                lane_pair_load(&w->fh[13]));
+                lane_pair_of(fh_pairs[26], fh_pairs[28]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][62], w->term[1][62]),
-                lane_pair_load(&w->fh[23]));
+                lane_pair_of(fh_pairs[46], fh_pairs[48]));
         lane_pair_store(&w->S[105], pair);
     }
-    w->S[107] = w->term[1][60]*w->fh[6] + w->term[1][61]*w->fh[15] + w->term[1][62]*w->fh[25];
+    w->S[107] = w->term[1][60]*fh_pairs[12] + w->term[1][61]*fh_pairs[30] +
+            w->term[1][62]*fh_pairs[50];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->term[1][72], w->term[1][72]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][73], w->term[1][73]),
-                lane_pair_load(&w->fh[13]));
+                lane_pair_of(fh_pairs[26], fh_pairs[28]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->term[1][74], w->term[1][74]),
-                lane_pair_load(&w->fh[23]));
+                lane_pair_of(fh_pairs[46], fh_pairs[48]));
         lane_pair_store(&w->S[109], pair);
     }
-    w->S[111] = w->term[1][72]*w->fh[6] + w->term[1][73]*w->fh[15] + w->term[1][74]*w->fh[25];
+    w->S[111] = w->term[1][72]*fh_pairs[12] + w->term[1][73]*fh_pairs[30] +
+            w->term[1][74]*fh_pairs[50];
 }
 
 NED_INERTIAL16_BLOCK void horner_transition(ned_inertial16_transition *restrict t, const
         ned_inertial16_discretize_scratch *restrict w)
 {
     const ned_inertial16_scalar one = 1.0;
-    int k;
-    for (k = 0; k < 6; ++k) {
-        t->Phi[k] = w->fh[0]*w->S[12+k] + w->fh[1]*w->S[24+k] + w->fh[2]*w->S[48+k] +
-                w->fh[3]*w->S[60+k];
-        t->Phi[9+k] = w->fh[0]*w->S[18+k] + w->fh[1]*w->S[30+k] + w->fh[2]*w->S[54+k] +
-                w->fh[3]*w->S[66+k];
-        t->Phi[15+k] = w->fh[10]*w->S[k] + w->fh[11]*w->S[24+k] + w->fh[12]*w->S[36+k];
-        t->Phi[24+k] = w->fh[10]*w->S[6+k] + w->fh[11]*w->S[30+k] + w->fh[12]*w->S[42+k];
-        t->Phi[30+k] = w->fh[19]*w->S[k] + w->fh[20]*w->S[12+k] + w->fh[21]*w->S[48+k] +
-                w->fh[22]*w->S[60+k];
-        t->Phi[39+k] = w->fh[19]*w->S[6+k] + w->fh[20]*w->S[18+k] + w->fh[21]*w->S[54+k] +
-                w->fh[22]*w->S[66+k];
-        t->Phi[45+k] = w->fh[29]*w->S[12+k] + w->fh[30]*w->S[24+k] + w->fh[31]*w->S[36+k] +
-                w->fh[32]*w->S[48+k] + w->fh[33]*w->S[60+k];
-        t->Phi[54+k] = w->fh[29]*w->S[18+k] + w->fh[30]*w->S[30+k] + w->fh[31]*w->S[42+k] +
-                w->fh[32]*w->S[54+k] + w->fh[33]*w->S[66+k];
-        t->Phi[60+k] = w->fh[37]*w->S[k] + w->fh[38]*w->S[24+k] + w->fh[39]*w->S[36+k] +
-                w->fh[40]*w->S[48+k] + w->fh[41]*w->S[60+k];
-        t->Phi[69+k] = w->fh[37]*w->S[6+k] + w->fh[38]*w->S[30+k] + w->fh[39]*w->S[42+k] +
-                w->fh[40]*w->S[54+k] + w->fh[41]*w->S[66+k];
-        t->Phi[75+k] = w->fh[45]*w->S[36+k];
-        t->Phi[84+k] = w->fh[45]*w->S[42+k];
-        t->Phi[90+k] = w->fh[46]*w->S[48+k] + w->fh[47]*w->S[60+k];
-        t->Phi[100+k] = w->fh[46]*w->S[54+k] + w->fh[47]*w->S[66+k];
-    }
-    t->Phi[9] = t->Phi[9] + w->fh[7]*w->S[84];
-    t->Phi[10] = t->Phi[10] + w->fh[8]*w->S[85];
-    t->Phi[11] = t->Phi[11] + w->fh[9]*w->S[86];
-    t->Phi[24] = t->Phi[24] + w->fh[16]*w->S[84];
-    t->Phi[25] = t->Phi[25] + w->fh[17]*w->S[85];
-    t->Phi[26] = t->Phi[26] + w->fh[18]*w->S[86];
-    t->Phi[39] = t->Phi[39] + w->fh[26]*w->S[84];
-    t->Phi[40] = t->Phi[40] + w->fh[27]*w->S[85];
-    t->Phi[41] = t->Phi[41] + w->fh[28]*w->S[86];
-    t->Phi[57] = t->Phi[57] + w->fh[34]*w->S[87];
-    t->Phi[58] = t->Phi[58] + w->fh[35]*w->S[88];
-    t->Phi[59] = t->Phi[59] + w->fh[36]*w->S[89];
-    t->Phi[72] = t->Phi[72] + w->fh[42]*w->S[87];
-    t->Phi[73] = t->Phi[73] + w->fh[43]*w->S[88];
-    t->Phi[74] = t->Phi[74] + w->fh[44]*w->S[89];
-    t->Phi[109] = w->fh[48]*w->S[84];
-    t->Phi[110] = w->fh[49]*w->S[85];
-    t->Phi[111] = w->fh[50]*w->S[86];
-    t->Phi[112] = w->fh[51]*w->S[87];
-    t->Phi[113] = w->fh[52]*w->S[88];
-    t->Phi[114] = w->fh[53]*w->S[89];
+    const ned_inertial16_scalar *fh_pairs = w->term[0] + lane_pair_offset(w->term[0]);
     {
-        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]),
-                lane_pair_load(&w->fh[4]));
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[12]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[24]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[48]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[60]));
+        lane_pair_store(&t->Phi[0], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[18]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[30]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[9], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[0]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[24]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[36]));
+        lane_pair_store(&t->Phi[15], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[6]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[30]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[42]));
+        lane_pair_store(&t->Phi[24], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[0]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[12]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[48]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[60]));
+        lane_pair_store(&t->Phi[30], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[6]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[18]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[39], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[58]), lane_pair_load(&w->S[12]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[24]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[36]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[48]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[60]));
+        lane_pair_store(&t->Phi[45], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[58]), lane_pair_load(&w->S[18]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[30]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[42]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[54], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[0]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[24]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[36]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[48]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[82]),
+                lane_pair_load(&w->S[60]));
+        lane_pair_store(&t->Phi[60], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[6]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[30]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[42]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[82]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[69], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[90]), lane_pair_load(&w->S[36]));
+        lane_pair_store(&t->Phi[75], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[90]), lane_pair_load(&w->S[42]));
+        lane_pair_store(&t->Phi[84], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[92]), lane_pair_load(&w->S[48]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->S[60]));
+        lane_pair_store(&t->Phi[90], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[92]), lane_pair_load(&w->S[54]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->S[66]));
+        lane_pair_store(&t->Phi[100], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[14]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[62]));
+        lane_pair_store(&t->Phi[2], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[20]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[56]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[11], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[2]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[38]));
+        lane_pair_store(&t->Phi[17], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[8]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[44]));
+        lane_pair_store(&t->Phi[26], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[2]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[14]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[62]));
+        lane_pair_store(&t->Phi[32], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[8]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[20]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[56]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[41], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[58]), lane_pair_load(&w->S[14]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[62]));
+        lane_pair_store(&t->Phi[47], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[58]), lane_pair_load(&w->S[20]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[44]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[56]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[56], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[2]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[26]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[38]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[82]),
+                lane_pair_load(&w->S[62]));
+        lane_pair_store(&t->Phi[62], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[8]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[32]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[44]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[56]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[82]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[71], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[90]), lane_pair_load(&w->S[38]));
+        lane_pair_store(&t->Phi[77], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[90]), lane_pair_load(&w->S[44]));
+        lane_pair_store(&t->Phi[86], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[92]), lane_pair_load(&w->S[50]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->S[62]));
+        lane_pair_store(&t->Phi[92], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[92]), lane_pair_load(&w->S[56]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->S[68]));
+        lane_pair_store(&t->Phi[102], lanes);
+    }
+    {
+        lane_pair lanes;
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[16]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[28]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[4], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[0]), lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[2]),
+                lane_pair_load(&w->S[34]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[4]),
+                lane_pair_load(&w->S[58]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[6]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[13], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[4]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[28]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[40]));
+        lane_pair_store(&t->Phi[19], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[20]), lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[22]),
+                lane_pair_load(&w->S[34]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[24]),
+                lane_pair_load(&w->S[46]));
+        lane_pair_store(&t->Phi[28], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[4]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[16]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[34], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[38]), lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[40]),
+                lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[42]),
+                lane_pair_load(&w->S[58]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[44]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[43], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[58]), lane_pair_load(&w->S[16]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[28]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[40]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[49], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[58]), lane_pair_load(&w->S[22]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[60]),
+                lane_pair_load(&w->S[34]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[62]),
+                lane_pair_load(&w->S[46]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[64]),
+                lane_pair_load(&w->S[58]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[66]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[58], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[4]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[28]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[40]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[82]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[64], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[74]), lane_pair_load(&w->S[10]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[76]),
+                lane_pair_load(&w->S[34]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[78]),
+                lane_pair_load(&w->S[46]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[80]),
+                lane_pair_load(&w->S[58]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[82]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[73], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[90]), lane_pair_load(&w->S[40]));
+        lane_pair_store(&t->Phi[79], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[90]), lane_pair_load(&w->S[46]));
+        lane_pair_store(&t->Phi[88], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[92]), lane_pair_load(&w->S[52]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->S[64]));
+        lane_pair_store(&t->Phi[94], lanes);
+        lanes = lane_pair_product(lane_pair_load_aligned(&fh_pairs[92]), lane_pair_load(&w->S[58]));
+        lanes = lane_pair_add_product(lanes, lane_pair_load_aligned(&fh_pairs[94]),
+                lane_pair_load(&w->S[70]));
+        lane_pair_store(&t->Phi[104], lanes);
+    }
+    t->Phi[9] = t->Phi[9] + fh_pairs[14]*w->S[84];
+    t->Phi[10] = t->Phi[10] + fh_pairs[16]*w->S[85];
+    t->Phi[11] = t->Phi[11] + fh_pairs[18]*w->S[86];
+    t->Phi[24] = t->Phi[24] + fh_pairs[32]*w->S[84];
+    t->Phi[25] = t->Phi[25] + fh_pairs[34]*w->S[85];
+    t->Phi[26] = t->Phi[26] + fh_pairs[36]*w->S[86];
+    t->Phi[39] = t->Phi[39] + fh_pairs[52]*w->S[84];
+    t->Phi[40] = t->Phi[40] + fh_pairs[54]*w->S[85];
+    t->Phi[41] = t->Phi[41] + fh_pairs[56]*w->S[86];
+    t->Phi[57] = t->Phi[57] + fh_pairs[68]*w->S[87];
+    t->Phi[58] = t->Phi[58] + fh_pairs[70]*w->S[88];
+    t->Phi[59] = t->Phi[59] + fh_pairs[72]*w->S[89];
+    t->Phi[72] = t->Phi[72] + fh_pairs[84]*w->S[87];
+    t->Phi[73] = t->Phi[73] + fh_pairs[86]*w->S[88];
+    t->Phi[74] = t->Phi[74] + fh_pairs[88]*w->S[89];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[96], fh_pairs[98]),
+                lane_pair_load(&w->S[84]));
+        lane_pair_store(&t->Phi[109], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[100], fh_pairs[102]),
+                lane_pair_load(&w->S[86]));
+        lane_pair_store(&t->Phi[111], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(fh_pairs[104], fh_pairs[106]),
+                lane_pair_load(&w->S[88]));
+        lane_pair_store(&t->Phi[113], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_of(w->S[0], w->S[0]), lane_pair_of(fh_pairs[8],
+                fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[1], w->S[1]),
-                lane_pair_load(&w->fh[13]));
+                lane_pair_of(fh_pairs[26], fh_pairs[28]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[2], w->S[2]),
-                lane_pair_load(&w->fh[23]));
+                lane_pair_of(fh_pairs[46], fh_pairs[48]));
         lane_pair_store(&t->Phi[6], pair);
     }
-    t->Phi[8] = w->S[0]*w->fh[6] + w->S[1]*w->fh[15] + w->S[2]*w->fh[25];
+    t->Phi[8] = w->S[0]*fh_pairs[12] + w->S[1]*fh_pairs[30] + w->S[2]*fh_pairs[50];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[12], w->S[12]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[13], w->S[13]),
-                lane_pair_load(&w->fh[13]));
+                lane_pair_of(fh_pairs[26], fh_pairs[28]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[14], w->S[14]),
-                lane_pair_load(&w->fh[23]));
+                lane_pair_of(fh_pairs[46], fh_pairs[48]));
         lane_pair_store(&t->Phi[21], pair);
     }
-    t->Phi[23] = w->S[12]*w->fh[6] + w->S[13]*w->fh[15] + w->S[14]*w->fh[25];
+    t->Phi[23] = w->S[12]*fh_pairs[12] + w->S[13]*fh_pairs[30] + w->S[14]*fh_pairs[50];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[24], w->S[24]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[25], w->S[25]),
-                lane_pair_load(&w->fh[13]));
+                lane_pair_of(fh_pairs[26], fh_pairs[28]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[26], w->S[26]),
-                lane_pair_load(&w->fh[23]));
+                lane_pair_of(fh_pairs[46], fh_pairs[48]));
         lane_pair_store(&t->Phi[36], pair);
     }
-    t->Phi[38] = w->S[24]*w->fh[6] + w->S[25]*w->fh[15] + w->S[26]*w->fh[25];
+    t->Phi[38] = w->S[24]*fh_pairs[12] + w->S[25]*fh_pairs[30] + w->S[26]*fh_pairs[50];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[36], w->S[36]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[37], w->S[37]),
-                lane_pair_load(&w->fh[13]));
+                lane_pair_of(fh_pairs[26], fh_pairs[28]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[38], w->S[38]),
-                lane_pair_load(&w->fh[23]));
+                lane_pair_of(fh_pairs[46], fh_pairs[48]));
         lane_pair_store(&t->Phi[51], pair);
     }
-    t->Phi[53] = w->S[36]*w->fh[6] + w->S[37]*w->fh[15] + w->S[38]*w->fh[25];
+    t->Phi[53] = w->S[36]*fh_pairs[12] + w->S[37]*fh_pairs[30] + w->S[38]*fh_pairs[50];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[48], w->S[48]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[49], w->S[49]),
-                lane_pair_load(&w->fh[13]));
+                lane_pair_of(fh_pairs[26], fh_pairs[28]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[50], w->S[50]),
-                lane_pair_load(&w->fh[23]));
+                lane_pair_of(fh_pairs[46], fh_pairs[48]));
         lane_pair_store(&t->Phi[66], pair);
     }
-    t->Phi[68] = w->S[48]*w->fh[6] + w->S[49]*w->fh[15] + w->S[50]*w->fh[25];
+    t->Phi[68] = w->S[48]*fh_pairs[12] + w->S[49]*fh_pairs[30] + w->S[50]*fh_pairs[50];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[60], w->S[60]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[61], w->S[61]),
-                lane_pair_load(&w->fh[13]));
+                lane_pair_of(fh_pairs[26], fh_pairs[28]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[62], w->S[62]),
-                lane_pair_load(&w->fh[23]));
+                lane_pair_of(fh_pairs[46], fh_pairs[48]));
         lane_pair_store(&t->Phi[81], pair);
     }
-    t->Phi[83] = w->S[60]*w->fh[6] + w->S[61]*w->fh[15] + w->S[62]*w->fh[25];
+    t->Phi[83] = w->S[60]*fh_pairs[12] + w->S[61]*fh_pairs[30] + w->S[62]*fh_pairs[50];
     {
         lane_pair pair = lane_pair_product(lane_pair_of(w->S[72], w->S[72]),
-                lane_pair_load(&w->fh[4]));
+                lane_pair_of(fh_pairs[8], fh_pairs[10]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[73], w->S[73]),
-                lane_pair_load(&w->fh[13]));
+                lane_pair_of(fh_pairs[26], fh_pairs[28]));
         pair = lane_pair_add_product(pair, lane_pair_of(w->S[74], w->S[74]),
-                lane_pair_load(&w->fh[23]));
+                lane_pair_of(fh_pairs[46], fh_pairs[48]));
         lane_pair_store(&t->Phi[97], pair);
     }
-    t->Phi[99] = w->S[72]*w->fh[6] + w->S[73]*w->fh[15] + w->S[74]*w->fh[25];
+    t->Phi[99] = w->S[72]*fh_pairs[12] + w->S[73]*fh_pairs[30] + w->S[74]*fh_pairs[50];
     t->Phi[96] = 0;
-    t->Phi[106] = one;
-    t->Phi[107] = one;
+    {
+        lane_pair pair = lane_pair_of(one, one);
+        lane_pair_store(&t->Phi[106], pair);
+    }
     t->Phi[108] = one;
 }
 
@@ -1511,12 +2134,21 @@ NED_INERTIAL16_BLOCK void doubling(ned_inertial16_transition *restrict t,
                 t->Phi[92]*t->Phi[39+k] + t->Phi[93]*t->Phi[54+k] + t->Phi[94]*t->Phi[69+k] +
                 t->Phi[95]*t->Phi[84+k] + t->Phi[96]*t->Phi[100+k];
     }
-    w->term[0][106] = t->Phi[109]*t->Phi[109];
-    w->term[0][107] = t->Phi[110]*t->Phi[110];
-    w->term[0][108] = t->Phi[111]*t->Phi[111];
-    w->term[0][109] = t->Phi[112]*t->Phi[112];
-    w->term[0][110] = t->Phi[113]*t->Phi[113];
-    w->term[0][111] = t->Phi[114]*t->Phi[114];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[109]),
+                lane_pair_load(&t->Phi[109]));
+        lane_pair_store(&w->term[0][106], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[111]),
+                lane_pair_load(&t->Phi[111]));
+        lane_pair_store(&w->term[0][108], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[113]),
+                lane_pair_load(&t->Phi[113]));
+        lane_pair_store(&w->term[0][110], pair);
+    }
     for (k = 0; k < 6; ++k) {
         w->term[1][k] = t->Phi[0]*w->S[k] + t->Phi[1]*w->S[12+k] + t->Phi[2]*w->S[24+k] +
                 t->Phi[3]*w->S[36+k] + t->Phi[4]*w->S[48+k] + t->Phi[5]*w->S[60+k];
@@ -1593,341 +2225,951 @@ NED_INERTIAL16_BLOCK void doubling(ned_inertial16_transition *restrict t,
                 t->Phi[93]*w->S[42+k] + t->Phi[94]*w->S[54+k] + t->Phi[95]*w->S[66+k] +
                 t->Phi[96]*w->S[78+k];
     }
-    w->term[1][106] = t->Phi[109]*w->S[84];
-    w->term[1][107] = t->Phi[110]*w->S[85];
-    w->term[1][108] = t->Phi[111]*w->S[86];
-    w->term[1][109] = t->Phi[112]*w->S[87];
-    w->term[1][110] = t->Phi[113]*w->S[88];
-    w->term[1][111] = t->Phi[114]*w->S[89];
-    w->term[0][9] = w->term[0][9] + t->Phi[9]*t->Phi[109];
-    w->term[0][10] = w->term[0][10] + t->Phi[10]*t->Phi[110];
-    w->term[0][11] = w->term[0][11] + t->Phi[11]*t->Phi[111];
-    w->term[0][12] = w->term[0][12] + t->Phi[12]*t->Phi[112];
-    w->term[0][13] = w->term[0][13] + t->Phi[13]*t->Phi[113];
-    w->term[0][14] = w->term[0][14] + t->Phi[14]*t->Phi[114];
-    w->term[0][24] = w->term[0][24] + t->Phi[24]*t->Phi[109];
-    w->term[0][25] = w->term[0][25] + t->Phi[25]*t->Phi[110];
-    w->term[0][26] = w->term[0][26] + t->Phi[26]*t->Phi[111];
-    w->term[0][27] = w->term[0][27] + t->Phi[27]*t->Phi[112];
-    w->term[0][28] = w->term[0][28] + t->Phi[28]*t->Phi[113];
-    w->term[0][29] = w->term[0][29] + t->Phi[29]*t->Phi[114];
-    w->term[0][39] = w->term[0][39] + t->Phi[39]*t->Phi[109];
-    w->term[0][40] = w->term[0][40] + t->Phi[40]*t->Phi[110];
-    w->term[0][41] = w->term[0][41] + t->Phi[41]*t->Phi[111];
-    w->term[0][42] = w->term[0][42] + t->Phi[42]*t->Phi[112];
-    w->term[0][43] = w->term[0][43] + t->Phi[43]*t->Phi[113];
-    w->term[0][44] = w->term[0][44] + t->Phi[44]*t->Phi[114];
-    w->term[0][54] = w->term[0][54] + t->Phi[54]*t->Phi[109];
-    w->term[0][55] = w->term[0][55] + t->Phi[55]*t->Phi[110];
-    w->term[0][56] = w->term[0][56] + t->Phi[56]*t->Phi[111];
-    w->term[0][57] = w->term[0][57] + t->Phi[57]*t->Phi[112];
-    w->term[0][58] = w->term[0][58] + t->Phi[58]*t->Phi[113];
-    w->term[0][59] = w->term[0][59] + t->Phi[59]*t->Phi[114];
-    w->term[0][69] = w->term[0][69] + t->Phi[69]*t->Phi[109];
-    w->term[0][70] = w->term[0][70] + t->Phi[70]*t->Phi[110];
-    w->term[0][71] = w->term[0][71] + t->Phi[71]*t->Phi[111];
-    w->term[0][72] = w->term[0][72] + t->Phi[72]*t->Phi[112];
-    w->term[0][73] = w->term[0][73] + t->Phi[73]*t->Phi[113];
-    w->term[0][74] = w->term[0][74] + t->Phi[74]*t->Phi[114];
-    w->term[0][84] = w->term[0][84] + t->Phi[84]*t->Phi[109];
-    w->term[0][85] = w->term[0][85] + t->Phi[85]*t->Phi[110];
-    w->term[0][86] = w->term[0][86] + t->Phi[86]*t->Phi[111];
-    w->term[0][87] = w->term[0][87] + t->Phi[87]*t->Phi[112];
-    w->term[0][88] = w->term[0][88] + t->Phi[88]*t->Phi[113];
-    w->term[0][89] = w->term[0][89] + t->Phi[89]*t->Phi[114];
-    w->term[0][100] = w->term[0][100] + t->Phi[100]*t->Phi[109];
-    w->term[0][101] = w->term[0][101] + t->Phi[101]*t->Phi[110];
-    w->term[0][102] = w->term[0][102] + t->Phi[102]*t->Phi[111];
-    w->term[0][103] = w->term[0][103] + t->Phi[103]*t->Phi[112];
-    w->term[0][104] = w->term[0][104] + t->Phi[104]*t->Phi[113];
-    w->term[0][105] = w->term[0][105] + t->Phi[105]*t->Phi[114];
-    w->term[1][6] = w->term[1][6] + t->Phi[6];
-    w->term[1][7] = w->term[1][7] + t->Phi[7];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[109]), lane_pair_load(&w->S[84]));
+        lane_pair_store(&w->term[1][106], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[111]), lane_pair_load(&w->S[86]));
+        lane_pair_store(&w->term[1][108], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&t->Phi[113]), lane_pair_load(&w->S[88]));
+        lane_pair_store(&w->term[1][110], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][9]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[9]),
+                lane_pair_load(&t->Phi[109]));
+        lane_pair_store(&w->term[0][9], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][11]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[11]),
+                lane_pair_load(&t->Phi[111]));
+        lane_pair_store(&w->term[0][11], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][13]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[13]),
+                lane_pair_load(&t->Phi[113]));
+        lane_pair_store(&w->term[0][13], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][24]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[24]),
+                lane_pair_load(&t->Phi[109]));
+        lane_pair_store(&w->term[0][24], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][26]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[26]),
+                lane_pair_load(&t->Phi[111]));
+        lane_pair_store(&w->term[0][26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][28]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[28]),
+                lane_pair_load(&t->Phi[113]));
+        lane_pair_store(&w->term[0][28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][39]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[39]),
+                lane_pair_load(&t->Phi[109]));
+        lane_pair_store(&w->term[0][39], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][41]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[41]),
+                lane_pair_load(&t->Phi[111]));
+        lane_pair_store(&w->term[0][41], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][43]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[43]),
+                lane_pair_load(&t->Phi[113]));
+        lane_pair_store(&w->term[0][43], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][54]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[54]),
+                lane_pair_load(&t->Phi[109]));
+        lane_pair_store(&w->term[0][54], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][56]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[56]),
+                lane_pair_load(&t->Phi[111]));
+        lane_pair_store(&w->term[0][56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][58]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[58]),
+                lane_pair_load(&t->Phi[113]));
+        lane_pair_store(&w->term[0][58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][69]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[69]),
+                lane_pair_load(&t->Phi[109]));
+        lane_pair_store(&w->term[0][69], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][71]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[71]),
+                lane_pair_load(&t->Phi[111]));
+        lane_pair_store(&w->term[0][71], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][73]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[73]),
+                lane_pair_load(&t->Phi[113]));
+        lane_pair_store(&w->term[0][73], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][84]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[84]),
+                lane_pair_load(&t->Phi[109]));
+        lane_pair_store(&w->term[0][84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][86]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[86]),
+                lane_pair_load(&t->Phi[111]));
+        lane_pair_store(&w->term[0][86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][88]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[88]),
+                lane_pair_load(&t->Phi[113]));
+        lane_pair_store(&w->term[0][88], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][100]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[100]),
+                lane_pair_load(&t->Phi[109]));
+        lane_pair_store(&w->term[0][100], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][102]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[102]),
+                lane_pair_load(&t->Phi[111]));
+        lane_pair_store(&w->term[0][102], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[0][104]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[104]),
+                lane_pair_load(&t->Phi[113]));
+        lane_pair_store(&w->term[0][104], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][6]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[6]));
+        lane_pair_store(&w->term[1][6], pair);
+    }
     w->term[1][8] = w->term[1][8] + t->Phi[8];
-    w->term[1][9] = w->term[1][9] + t->Phi[9]*w->S[84];
-    w->term[1][10] = w->term[1][10] + t->Phi[10]*w->S[85];
-    w->term[1][11] = w->term[1][11] + t->Phi[11]*w->S[86];
-    w->term[1][12] = w->term[1][12] + t->Phi[12]*w->S[87];
-    w->term[1][13] = w->term[1][13] + t->Phi[13]*w->S[88];
-    w->term[1][14] = w->term[1][14] + t->Phi[14]*w->S[89];
-    w->term[1][21] = w->term[1][21] + t->Phi[21];
-    w->term[1][22] = w->term[1][22] + t->Phi[22];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][9]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[9]), lane_pair_load(&w->S[84]));
+        lane_pair_store(&w->term[1][9], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][11]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[11]), lane_pair_load(&w->S[86]));
+        lane_pair_store(&w->term[1][11], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][13]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[13]), lane_pair_load(&w->S[88]));
+        lane_pair_store(&w->term[1][13], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][21]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[21]));
+        lane_pair_store(&w->term[1][21], pair);
+    }
     w->term[1][23] = w->term[1][23] + t->Phi[23];
-    w->term[1][24] = w->term[1][24] + t->Phi[24]*w->S[84];
-    w->term[1][25] = w->term[1][25] + t->Phi[25]*w->S[85];
-    w->term[1][26] = w->term[1][26] + t->Phi[26]*w->S[86];
-    w->term[1][27] = w->term[1][27] + t->Phi[27]*w->S[87];
-    w->term[1][28] = w->term[1][28] + t->Phi[28]*w->S[88];
-    w->term[1][29] = w->term[1][29] + t->Phi[29]*w->S[89];
-    w->term[1][36] = w->term[1][36] + t->Phi[36];
-    w->term[1][37] = w->term[1][37] + t->Phi[37];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][24]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[24]), lane_pair_load(&w->S[84]));
+        lane_pair_store(&w->term[1][24], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][26]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[26]), lane_pair_load(&w->S[86]));
+        lane_pair_store(&w->term[1][26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][28]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[28]), lane_pair_load(&w->S[88]));
+        lane_pair_store(&w->term[1][28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][36]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[36]));
+        lane_pair_store(&w->term[1][36], pair);
+    }
     w->term[1][38] = w->term[1][38] + t->Phi[38];
-    w->term[1][39] = w->term[1][39] + t->Phi[39]*w->S[84];
-    w->term[1][40] = w->term[1][40] + t->Phi[40]*w->S[85];
-    w->term[1][41] = w->term[1][41] + t->Phi[41]*w->S[86];
-    w->term[1][42] = w->term[1][42] + t->Phi[42]*w->S[87];
-    w->term[1][43] = w->term[1][43] + t->Phi[43]*w->S[88];
-    w->term[1][44] = w->term[1][44] + t->Phi[44]*w->S[89];
-    w->term[1][51] = w->term[1][51] + t->Phi[51];
-    w->term[1][52] = w->term[1][52] + t->Phi[52];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][39]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[39]), lane_pair_load(&w->S[84]));
+        lane_pair_store(&w->term[1][39], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][41]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[41]), lane_pair_load(&w->S[86]));
+        lane_pair_store(&w->term[1][41], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][43]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[43]), lane_pair_load(&w->S[88]));
+        lane_pair_store(&w->term[1][43], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][51]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[51]));
+        lane_pair_store(&w->term[1][51], pair);
+    }
     w->term[1][53] = w->term[1][53] + t->Phi[53];
-    w->term[1][54] = w->term[1][54] + t->Phi[54]*w->S[84];
-    w->term[1][55] = w->term[1][55] + t->Phi[55]*w->S[85];
-    w->term[1][56] = w->term[1][56] + t->Phi[56]*w->S[86];
-    w->term[1][57] = w->term[1][57] + t->Phi[57]*w->S[87];
-    w->term[1][58] = w->term[1][58] + t->Phi[58]*w->S[88];
-    w->term[1][59] = w->term[1][59] + t->Phi[59]*w->S[89];
-    w->term[1][66] = w->term[1][66] + t->Phi[66];
-    w->term[1][67] = w->term[1][67] + t->Phi[67];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][54]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[54]), lane_pair_load(&w->S[84]));
+        lane_pair_store(&w->term[1][54], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][56]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[56]), lane_pair_load(&w->S[86]));
+        lane_pair_store(&w->term[1][56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][58]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[58]), lane_pair_load(&w->S[88]));
+        lane_pair_store(&w->term[1][58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][66]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[66]));
+        lane_pair_store(&w->term[1][66], pair);
+    }
     w->term[1][68] = w->term[1][68] + t->Phi[68];
-    w->term[1][69] = w->term[1][69] + t->Phi[69]*w->S[84];
-    w->term[1][70] = w->term[1][70] + t->Phi[70]*w->S[85];
-    w->term[1][71] = w->term[1][71] + t->Phi[71]*w->S[86];
-    w->term[1][72] = w->term[1][72] + t->Phi[72]*w->S[87];
-    w->term[1][73] = w->term[1][73] + t->Phi[73]*w->S[88];
-    w->term[1][74] = w->term[1][74] + t->Phi[74]*w->S[89];
-    w->term[1][81] = w->term[1][81] + t->Phi[81];
-    w->term[1][82] = w->term[1][82] + t->Phi[82];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][69]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[69]), lane_pair_load(&w->S[84]));
+        lane_pair_store(&w->term[1][69], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][71]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[71]), lane_pair_load(&w->S[86]));
+        lane_pair_store(&w->term[1][71], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][73]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[73]), lane_pair_load(&w->S[88]));
+        lane_pair_store(&w->term[1][73], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][81]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[81]));
+        lane_pair_store(&w->term[1][81], pair);
+    }
     w->term[1][83] = w->term[1][83] + t->Phi[83];
-    w->term[1][84] = w->term[1][84] + t->Phi[84]*w->S[84];
-    w->term[1][85] = w->term[1][85] + t->Phi[85]*w->S[85];
-    w->term[1][86] = w->term[1][86] + t->Phi[86]*w->S[86];
-    w->term[1][87] = w->term[1][87] + t->Phi[87]*w->S[87];
-    w->term[1][88] = w->term[1][88] + t->Phi[88]*w->S[88];
-    w->term[1][89] = w->term[1][89] + t->Phi[89]*w->S[89];
-    w->term[1][97] = w->term[1][97] + t->Phi[97];
-    w->term[1][98] = w->term[1][98] + t->Phi[98];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][84]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[84]), lane_pair_load(&w->S[84]));
+        lane_pair_store(&w->term[1][84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][86]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[86]), lane_pair_load(&w->S[86]));
+        lane_pair_store(&w->term[1][86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][88]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[88]), lane_pair_load(&w->S[88]));
+        lane_pair_store(&w->term[1][88], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][97]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[97]));
+        lane_pair_store(&w->term[1][97], pair);
+    }
     w->term[1][99] = w->term[1][99] + t->Phi[99];
-    w->term[1][100] = w->term[1][100] + t->Phi[100]*w->S[84];
-    w->term[1][101] = w->term[1][101] + t->Phi[101]*w->S[85];
-    w->term[1][102] = w->term[1][102] + t->Phi[102]*w->S[86];
-    w->term[1][103] = w->term[1][103] + t->Phi[103]*w->S[87];
-    w->term[1][104] = w->term[1][104] + t->Phi[104]*w->S[88];
-    w->term[1][105] = w->term[1][105] + t->Phi[105]*w->S[89];
-    t->Phi[0] = t->Phi[0] + t->Phi[0] + w->term[0][0];
-    t->Phi[1] = t->Phi[1] + t->Phi[1] + w->term[0][1];
-    t->Phi[2] = t->Phi[2] + t->Phi[2] + w->term[0][2];
-    t->Phi[3] = t->Phi[3] + t->Phi[3] + w->term[0][3];
-    t->Phi[4] = t->Phi[4] + t->Phi[4] + w->term[0][4];
-    t->Phi[5] = t->Phi[5] + t->Phi[5] + w->term[0][5];
-    t->Phi[6] = t->Phi[6] + t->Phi[6] + w->term[0][6];
-    t->Phi[7] = t->Phi[7] + t->Phi[7] + w->term[0][7];
-    t->Phi[8] = t->Phi[8] + t->Phi[8] + w->term[0][8];
-    t->Phi[9] = t->Phi[9] + t->Phi[9] + w->term[0][9];
-    t->Phi[10] = t->Phi[10] + t->Phi[10] + w->term[0][10];
-    t->Phi[11] = t->Phi[11] + t->Phi[11] + w->term[0][11];
-    t->Phi[12] = t->Phi[12] + t->Phi[12] + w->term[0][12];
-    t->Phi[13] = t->Phi[13] + t->Phi[13] + w->term[0][13];
-    t->Phi[14] = t->Phi[14] + t->Phi[14] + w->term[0][14];
-    t->Phi[15] = t->Phi[15] + t->Phi[15] + w->term[0][15];
-    t->Phi[16] = t->Phi[16] + t->Phi[16] + w->term[0][16];
-    t->Phi[17] = t->Phi[17] + t->Phi[17] + w->term[0][17];
-    t->Phi[18] = t->Phi[18] + t->Phi[18] + w->term[0][18];
-    t->Phi[19] = t->Phi[19] + t->Phi[19] + w->term[0][19];
-    t->Phi[20] = t->Phi[20] + t->Phi[20] + w->term[0][20];
-    t->Phi[21] = t->Phi[21] + t->Phi[21] + w->term[0][21];
-    t->Phi[22] = t->Phi[22] + t->Phi[22] + w->term[0][22];
-    t->Phi[23] = t->Phi[23] + t->Phi[23] + w->term[0][23];
-    t->Phi[24] = t->Phi[24] + t->Phi[24] + w->term[0][24];
-    t->Phi[25] = t->Phi[25] + t->Phi[25] + w->term[0][25];
-    t->Phi[26] = t->Phi[26] + t->Phi[26] + w->term[0][26];
-    t->Phi[27] = t->Phi[27] + t->Phi[27] + w->term[0][27];
-    t->Phi[28] = t->Phi[28] + t->Phi[28] + w->term[0][28];
-    t->Phi[29] = t->Phi[29] + t->Phi[29] + w->term[0][29];
-    t->Phi[30] = t->Phi[30] + t->Phi[30] + w->term[0][30];
-    t->Phi[31] = t->Phi[31] + t->Phi[31] + w->term[0][31];
-    t->Phi[32] = t->Phi[32] + t->Phi[32] + w->term[0][32];
-    t->Phi[33] = t->Phi[33] + t->Phi[33] + w->term[0][33];
-    t->Phi[34] = t->Phi[34] + t->Phi[34] + w->term[0][34];
-    t->Phi[35] = t->Phi[35] + t->Phi[35] + w->term[0][35];
-    t->Phi[36] = t->Phi[36] + t->Phi[36] + w->term[0][36];
-    t->Phi[37] = t->Phi[37] + t->Phi[37] + w->term[0][37];
-    t->Phi[38] = t->Phi[38] + t->Phi[38] + w->term[0][38];
-    t->Phi[39] = t->Phi[39] + t->Phi[39] + w->term[0][39];
-    t->Phi[40] = t->Phi[40] + t->Phi[40] + w->term[0][40];
-    t->Phi[41] = t->Phi[41] + t->Phi[41] + w->term[0][41];
-    t->Phi[42] = t->Phi[42] + t->Phi[42] + w->term[0][42];
-    t->Phi[43] = t->Phi[43] + t->Phi[43] + w->term[0][43];
-    t->Phi[44] = t->Phi[44] + t->Phi[44] + w->term[0][44];
-    t->Phi[45] = t->Phi[45] + t->Phi[45] + w->term[0][45];
-    t->Phi[46] = t->Phi[46] + t->Phi[46] + w->term[0][46];
-    t->Phi[47] = t->Phi[47] + t->Phi[47] + w->term[0][47];
-    t->Phi[48] = t->Phi[48] + t->Phi[48] + w->term[0][48];
-    t->Phi[49] = t->Phi[49] + t->Phi[49] + w->term[0][49];
-    t->Phi[50] = t->Phi[50] + t->Phi[50] + w->term[0][50];
-    t->Phi[51] = t->Phi[51] + t->Phi[51] + w->term[0][51];
-    t->Phi[52] = t->Phi[52] + t->Phi[52] + w->term[0][52];
-    t->Phi[53] = t->Phi[53] + t->Phi[53] + w->term[0][53];
-    t->Phi[54] = t->Phi[54] + t->Phi[54] + w->term[0][54];
-    t->Phi[55] = t->Phi[55] + t->Phi[55] + w->term[0][55];
-    t->Phi[56] = t->Phi[56] + t->Phi[56] + w->term[0][56];
-    t->Phi[57] = t->Phi[57] + t->Phi[57] + w->term[0][57];
-    t->Phi[58] = t->Phi[58] + t->Phi[58] + w->term[0][58];
-    t->Phi[59] = t->Phi[59] + t->Phi[59] + w->term[0][59];
-    t->Phi[60] = t->Phi[60] + t->Phi[60] + w->term[0][60];
-    t->Phi[61] = t->Phi[61] + t->Phi[61] + w->term[0][61];
-    t->Phi[62] = t->Phi[62] + t->Phi[62] + w->term[0][62];
-    t->Phi[63] = t->Phi[63] + t->Phi[63] + w->term[0][63];
-    t->Phi[64] = t->Phi[64] + t->Phi[64] + w->term[0][64];
-    t->Phi[65] = t->Phi[65] + t->Phi[65] + w->term[0][65];
-    t->Phi[66] = t->Phi[66] + t->Phi[66] + w->term[0][66];
-    t->Phi[67] = t->Phi[67] + t->Phi[67] + w->term[0][67];
-    t->Phi[68] = t->Phi[68] + t->Phi[68] + w->term[0][68];
-    t->Phi[69] = t->Phi[69] + t->Phi[69] + w->term[0][69];
-    t->Phi[70] = t->Phi[70] + t->Phi[70] + w->term[0][70];
-    t->Phi[71] = t->Phi[71] + t->Phi[71] + w->term[0][71];
-    t->Phi[72] = t->Phi[72] + t->Phi[72] + w->term[0][72];
-    t->Phi[73] = t->Phi[73] + t->Phi[73] + w->term[0][73];
-    t->Phi[74] = t->Phi[74] + t->Phi[74] + w->term[0][74];
-    t->Phi[75] = t->Phi[75] + t->Phi[75] + w->term[0][75];
-    t->Phi[76] = t->Phi[76] + t->Phi[76] + w->term[0][76];
-    t->Phi[77] = t->Phi[77] + t->Phi[77] + w->term[0][77];
-    t->Phi[78] = t->Phi[78] + t->Phi[78] + w->term[0][78];
-    t->Phi[79] = t->Phi[79] + t->Phi[79] + w->term[0][79];
-    t->Phi[80] = t->Phi[80] + t->Phi[80] + w->term[0][80];
-    t->Phi[81] = t->Phi[81] + t->Phi[81] + w->term[0][81];
-    t->Phi[82] = t->Phi[82] + t->Phi[82] + w->term[0][82];
-    t->Phi[83] = t->Phi[83] + t->Phi[83] + w->term[0][83];
-    t->Phi[84] = t->Phi[84] + t->Phi[84] + w->term[0][84];
-    t->Phi[85] = t->Phi[85] + t->Phi[85] + w->term[0][85];
-    t->Phi[86] = t->Phi[86] + t->Phi[86] + w->term[0][86];
-    t->Phi[87] = t->Phi[87] + t->Phi[87] + w->term[0][87];
-    t->Phi[88] = t->Phi[88] + t->Phi[88] + w->term[0][88];
-    t->Phi[89] = t->Phi[89] + t->Phi[89] + w->term[0][89];
-    t->Phi[90] = t->Phi[90] + t->Phi[90] + w->term[0][90];
-    t->Phi[91] = t->Phi[91] + t->Phi[91] + w->term[0][91];
-    t->Phi[92] = t->Phi[92] + t->Phi[92] + w->term[0][92];
-    t->Phi[93] = t->Phi[93] + t->Phi[93] + w->term[0][93];
-    t->Phi[94] = t->Phi[94] + t->Phi[94] + w->term[0][94];
-    t->Phi[95] = t->Phi[95] + t->Phi[95] + w->term[0][95];
-    t->Phi[96] = t->Phi[96] + t->Phi[96] + w->term[0][96];
-    t->Phi[97] = t->Phi[97] + t->Phi[97] + w->term[0][97];
-    t->Phi[98] = t->Phi[98] + t->Phi[98] + w->term[0][98];
-    t->Phi[99] = t->Phi[99] + t->Phi[99] + w->term[0][99];
-    t->Phi[100] = t->Phi[100] + t->Phi[100] + w->term[0][100];
-    t->Phi[101] = t->Phi[101] + t->Phi[101] + w->term[0][101];
-    t->Phi[102] = t->Phi[102] + t->Phi[102] + w->term[0][102];
-    t->Phi[103] = t->Phi[103] + t->Phi[103] + w->term[0][103];
-    t->Phi[104] = t->Phi[104] + t->Phi[104] + w->term[0][104];
-    t->Phi[105] = t->Phi[105] + t->Phi[105] + w->term[0][105];
-    t->Phi[109] = t->Phi[109] + t->Phi[109] + w->term[0][106];
-    t->Phi[110] = t->Phi[110] + t->Phi[110] + w->term[0][107];
-    t->Phi[111] = t->Phi[111] + t->Phi[111] + w->term[0][108];
-    t->Phi[112] = t->Phi[112] + t->Phi[112] + w->term[0][109];
-    t->Phi[113] = t->Phi[113] + t->Phi[113] + w->term[0][110];
-    t->Phi[114] = t->Phi[114] + t->Phi[114] + w->term[0][111];
-    w->S[0] = w->S[0] + half*w->term[1][0];
-    w->S[1] = w->S[1] + half*w->term[1][1];
-    w->S[2] = w->S[2] + half*w->term[1][2];
-    w->S[3] = w->S[3] + half*w->term[1][3];
-    w->S[4] = w->S[4] + half*w->term[1][4];
-    w->S[5] = w->S[5] + half*w->term[1][5];
-    w->S[90] = w->S[90] + half*w->term[1][6];
-    w->S[91] = w->S[91] + half*w->term[1][7];
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][100]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[100]), lane_pair_load(&w->S[84]));
+        lane_pair_store(&w->term[1][100], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][102]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[102]), lane_pair_load(&w->S[86]));
+        lane_pair_store(&w->term[1][102], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->term[1][104]);
+        pair = lane_pair_add_product(pair, lane_pair_load(&t->Phi[104]), lane_pair_load(&w->S[88]));
+        lane_pair_store(&w->term[1][104], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[0]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[0]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][0]));
+        lane_pair_store(&t->Phi[0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[2]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[2]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][2]));
+        lane_pair_store(&t->Phi[2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[4]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[4]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][4]));
+        lane_pair_store(&t->Phi[4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[6]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[6]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][6]));
+        lane_pair_store(&t->Phi[6], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[8]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[8]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][8]));
+        lane_pair_store(&t->Phi[8], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[10]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[10]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][10]));
+        lane_pair_store(&t->Phi[10], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[12]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[12]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][12]));
+        lane_pair_store(&t->Phi[12], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[14]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[14]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][14]));
+        lane_pair_store(&t->Phi[14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[16]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[16]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][16]));
+        lane_pair_store(&t->Phi[16], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[18]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[18]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][18]));
+        lane_pair_store(&t->Phi[18], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[20]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[20]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][20]));
+        lane_pair_store(&t->Phi[20], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[22]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[22]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][22]));
+        lane_pair_store(&t->Phi[22], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[24]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[24]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][24]));
+        lane_pair_store(&t->Phi[24], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[26]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[26]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][26]));
+        lane_pair_store(&t->Phi[26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[28]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[28]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][28]));
+        lane_pair_store(&t->Phi[28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[30]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[30]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][30]));
+        lane_pair_store(&t->Phi[30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[32]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[32]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][32]));
+        lane_pair_store(&t->Phi[32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[34]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[34]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][34]));
+        lane_pair_store(&t->Phi[34], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[36]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[36]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][36]));
+        lane_pair_store(&t->Phi[36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[38]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[38]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][38]));
+        lane_pair_store(&t->Phi[38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[40]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[40]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][40]));
+        lane_pair_store(&t->Phi[40], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[42]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[42]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][42]));
+        lane_pair_store(&t->Phi[42], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[44]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[44]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][44]));
+        lane_pair_store(&t->Phi[44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[46]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[46]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][46]));
+        lane_pair_store(&t->Phi[46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[48]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[48]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][48]));
+        lane_pair_store(&t->Phi[48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[50]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[50]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][50]));
+        lane_pair_store(&t->Phi[50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[52]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[52]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][52]));
+        lane_pair_store(&t->Phi[52], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[54]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[54]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][54]));
+        lane_pair_store(&t->Phi[54], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[56]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[56]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][56]));
+        lane_pair_store(&t->Phi[56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[58]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[58]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][58]));
+        lane_pair_store(&t->Phi[58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[60]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[60]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][60]));
+        lane_pair_store(&t->Phi[60], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[62]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[62]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][62]));
+        lane_pair_store(&t->Phi[62], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[64]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[64]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][64]));
+        lane_pair_store(&t->Phi[64], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[66]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[66]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][66]));
+        lane_pair_store(&t->Phi[66], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[68]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[68]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][68]));
+        lane_pair_store(&t->Phi[68], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[70]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[70]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][70]));
+        lane_pair_store(&t->Phi[70], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[72]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[72]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][72]));
+        lane_pair_store(&t->Phi[72], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[74]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[74]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][74]));
+        lane_pair_store(&t->Phi[74], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[76]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[76]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][76]));
+        lane_pair_store(&t->Phi[76], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[78]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[78]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][78]));
+        lane_pair_store(&t->Phi[78], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[80]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[80]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][80]));
+        lane_pair_store(&t->Phi[80], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[82]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[82]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][82]));
+        lane_pair_store(&t->Phi[82], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[84]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[84]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][84]));
+        lane_pair_store(&t->Phi[84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[86]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[86]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][86]));
+        lane_pair_store(&t->Phi[86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[88]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[88]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][88]));
+        lane_pair_store(&t->Phi[88], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[90]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[90]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][90]));
+        lane_pair_store(&t->Phi[90], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[92]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[92]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][92]));
+        lane_pair_store(&t->Phi[92], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[94]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[94]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][94]));
+        lane_pair_store(&t->Phi[94], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[96]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[96]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][96]));
+        lane_pair_store(&t->Phi[96], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[98]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[98]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][98]));
+        lane_pair_store(&t->Phi[98], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[100]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[100]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][100]));
+        lane_pair_store(&t->Phi[100], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[102]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[102]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][102]));
+        lane_pair_store(&t->Phi[102], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[104]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[104]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][104]));
+        lane_pair_store(&t->Phi[104], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[109]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[109]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][106]));
+        lane_pair_store(&t->Phi[109], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[111]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[111]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][108]));
+        lane_pair_store(&t->Phi[111], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[113]);
+        pair = lane_pair_add(pair, lane_pair_load(&t->Phi[113]));
+        pair = lane_pair_add(pair, lane_pair_load(&w->term[0][110]));
+        lane_pair_store(&t->Phi[113], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[0]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][0]));
+        lane_pair_store(&w->S[0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[2]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][2]));
+        lane_pair_store(&w->S[2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[4]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][4]));
+        lane_pair_store(&w->S[4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[90]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][6]));
+        lane_pair_store(&w->S[90], pair);
+    }
     w->S[92] = w->S[92] + half*w->term[1][8];
-    w->S[6] = w->S[6] + half*w->term[1][9];
-    w->S[7] = w->S[7] + half*w->term[1][10];
-    w->S[8] = w->S[8] + half*w->term[1][11];
-    w->S[9] = w->S[9] + half*w->term[1][12];
-    w->S[10] = w->S[10] + half*w->term[1][13];
-    w->S[11] = w->S[11] + half*w->term[1][14];
-    w->S[12] = w->S[12] + half*w->term[1][15];
-    w->S[13] = w->S[13] + half*w->term[1][16];
-    w->S[14] = w->S[14] + half*w->term[1][17];
-    w->S[15] = w->S[15] + half*w->term[1][18];
-    w->S[16] = w->S[16] + half*w->term[1][19];
-    w->S[17] = w->S[17] + half*w->term[1][20];
-    w->S[93] = w->S[93] + half*w->term[1][21];
-    w->S[94] = w->S[94] + half*w->term[1][22];
+    {
+        lane_pair pair = lane_pair_load(&w->S[6]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][9]));
+        lane_pair_store(&w->S[6], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[8]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][11]));
+        lane_pair_store(&w->S[8], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[10]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][13]));
+        lane_pair_store(&w->S[10], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[12]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][15]));
+        lane_pair_store(&w->S[12], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[14]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][17]));
+        lane_pair_store(&w->S[14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[16]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][19]));
+        lane_pair_store(&w->S[16], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[93]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][21]));
+        lane_pair_store(&w->S[93], pair);
+    }
     w->S[95] = w->S[95] + half*w->term[1][23];
-    w->S[18] = w->S[18] + half*w->term[1][24];
-    w->S[19] = w->S[19] + half*w->term[1][25];
-    w->S[20] = w->S[20] + half*w->term[1][26];
-    w->S[21] = w->S[21] + half*w->term[1][27];
-    w->S[22] = w->S[22] + half*w->term[1][28];
-    w->S[23] = w->S[23] + half*w->term[1][29];
-    w->S[24] = w->S[24] + half*w->term[1][30];
-    w->S[25] = w->S[25] + half*w->term[1][31];
-    w->S[26] = w->S[26] + half*w->term[1][32];
-    w->S[27] = w->S[27] + half*w->term[1][33];
-    w->S[28] = w->S[28] + half*w->term[1][34];
-    w->S[29] = w->S[29] + half*w->term[1][35];
-    w->S[96] = w->S[96] + half*w->term[1][36];
-    w->S[97] = w->S[97] + half*w->term[1][37];
+    {
+        lane_pair pair = lane_pair_load(&w->S[18]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][24]));
+        lane_pair_store(&w->S[18], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[20]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][26]));
+        lane_pair_store(&w->S[20], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[22]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][28]));
+        lane_pair_store(&w->S[22], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[24]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][30]));
+        lane_pair_store(&w->S[24], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[26]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][32]));
+        lane_pair_store(&w->S[26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[28]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][34]));
+        lane_pair_store(&w->S[28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[96]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][36]));
+        lane_pair_store(&w->S[96], pair);
+    }
     w->S[98] = w->S[98] + half*w->term[1][38];
-    w->S[30] = w->S[30] + half*w->term[1][39];
-    w->S[31] = w->S[31] + half*w->term[1][40];
-    w->S[32] = w->S[32] + half*w->term[1][41];
-    w->S[33] = w->S[33] + half*w->term[1][42];
-    w->S[34] = w->S[34] + half*w->term[1][43];
-    w->S[35] = w->S[35] + half*w->term[1][44];
-    w->S[36] = w->S[36] + half*w->term[1][45];
-    w->S[37] = w->S[37] + half*w->term[1][46];
-    w->S[38] = w->S[38] + half*w->term[1][47];
-    w->S[39] = w->S[39] + half*w->term[1][48];
-    w->S[40] = w->S[40] + half*w->term[1][49];
-    w->S[41] = w->S[41] + half*w->term[1][50];
-    w->S[99] = w->S[99] + half*w->term[1][51];
-    w->S[100] = w->S[100] + half*w->term[1][52];
+    {
+        lane_pair pair = lane_pair_load(&w->S[30]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][39]));
+        lane_pair_store(&w->S[30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[32]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][41]));
+        lane_pair_store(&w->S[32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[34]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][43]));
+        lane_pair_store(&w->S[34], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[36]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][45]));
+        lane_pair_store(&w->S[36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[38]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][47]));
+        lane_pair_store(&w->S[38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[40]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][49]));
+        lane_pair_store(&w->S[40], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[99]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][51]));
+        lane_pair_store(&w->S[99], pair);
+    }
     w->S[101] = w->S[101] + half*w->term[1][53];
-    w->S[42] = w->S[42] + half*w->term[1][54];
-    w->S[43] = w->S[43] + half*w->term[1][55];
-    w->S[44] = w->S[44] + half*w->term[1][56];
-    w->S[45] = w->S[45] + half*w->term[1][57];
-    w->S[46] = w->S[46] + half*w->term[1][58];
-    w->S[47] = w->S[47] + half*w->term[1][59];
-    w->S[48] = w->S[48] + half*w->term[1][60];
-    w->S[49] = w->S[49] + half*w->term[1][61];
-    w->S[50] = w->S[50] + half*w->term[1][62];
-    w->S[51] = w->S[51] + half*w->term[1][63];
-    w->S[52] = w->S[52] + half*w->term[1][64];
-    w->S[53] = w->S[53] + half*w->term[1][65];
-    w->S[102] = w->S[102] + half*w->term[1][66];
-    w->S[103] = w->S[103] + half*w->term[1][67];
+    {
+        lane_pair pair = lane_pair_load(&w->S[42]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][54]));
+        lane_pair_store(&w->S[42], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[44]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][56]));
+        lane_pair_store(&w->S[44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[46]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][58]));
+        lane_pair_store(&w->S[46], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[48]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][60]));
+        lane_pair_store(&w->S[48], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[50]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][62]));
+        lane_pair_store(&w->S[50], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[52]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][64]));
+        lane_pair_store(&w->S[52], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[102]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][66]));
+        lane_pair_store(&w->S[102], pair);
+    }
     w->S[104] = w->S[104] + half*w->term[1][68];
-    w->S[54] = w->S[54] + half*w->term[1][69];
-    w->S[55] = w->S[55] + half*w->term[1][70];
-    w->S[56] = w->S[56] + half*w->term[1][71];
-    w->S[57] = w->S[57] + half*w->term[1][72];
-    w->S[58] = w->S[58] + half*w->term[1][73];
-    w->S[59] = w->S[59] + half*w->term[1][74];
-    w->S[60] = w->S[60] + half*w->term[1][75];
-    w->S[61] = w->S[61] + half*w->term[1][76];
-    w->S[62] = w->S[62] + half*w->term[1][77];
-    w->S[63] = w->S[63] + half*w->term[1][78];
-    w->S[64] = w->S[64] + half*w->term[1][79];
-    w->S[65] = w->S[65] + half*w->term[1][80];
-    w->S[105] = w->S[105] + half*w->term[1][81];
-    w->S[106] = w->S[106] + half*w->term[1][82];
+    {
+        lane_pair pair = lane_pair_load(&w->S[54]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][69]));
+        lane_pair_store(&w->S[54], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[56]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][71]));
+        lane_pair_store(&w->S[56], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[58]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][73]));
+        lane_pair_store(&w->S[58], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[60]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][75]));
+        lane_pair_store(&w->S[60], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[62]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][77]));
+        lane_pair_store(&w->S[62], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[64]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][79]));
+        lane_pair_store(&w->S[64], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[105]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][81]));
+        lane_pair_store(&w->S[105], pair);
+    }
     w->S[107] = w->S[107] + half*w->term[1][83];
-    w->S[66] = w->S[66] + half*w->term[1][84];
-    w->S[67] = w->S[67] + half*w->term[1][85];
-    w->S[68] = w->S[68] + half*w->term[1][86];
-    w->S[69] = w->S[69] + half*w->term[1][87];
-    w->S[70] = w->S[70] + half*w->term[1][88];
-    w->S[71] = w->S[71] + half*w->term[1][89];
-    w->S[72] = w->S[72] + half*w->term[1][90];
-    w->S[73] = w->S[73] + half*w->term[1][91];
-    w->S[74] = w->S[74] + half*w->term[1][92];
-    w->S[75] = w->S[75] + half*w->term[1][93];
-    w->S[76] = w->S[76] + half*w->term[1][94];
-    w->S[77] = w->S[77] + half*w->term[1][95];
-    w->S[108] = w->S[108] + half*w->term[1][96];
-    w->S[109] = w->S[109] + half*w->term[1][97];
-    w->S[110] = w->S[110] + half*w->term[1][98];
-    w->S[111] = w->S[111] + half*w->term[1][99];
-    w->S[78] = w->S[78] + half*w->term[1][100];
-    w->S[79] = w->S[79] + half*w->term[1][101];
-    w->S[80] = w->S[80] + half*w->term[1][102];
-    w->S[81] = w->S[81] + half*w->term[1][103];
-    w->S[82] = w->S[82] + half*w->term[1][104];
-    w->S[83] = w->S[83] + half*w->term[1][105];
-    w->S[84] = w->S[84] + half*w->term[1][106];
-    w->S[85] = w->S[85] + half*w->term[1][107];
-    w->S[86] = w->S[86] + half*w->term[1][108];
-    w->S[87] = w->S[87] + half*w->term[1][109];
-    w->S[88] = w->S[88] + half*w->term[1][110];
-    w->S[89] = w->S[89] + half*w->term[1][111];
+    {
+        lane_pair pair = lane_pair_load(&w->S[66]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][84]));
+        lane_pair_store(&w->S[66], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[68]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][86]));
+        lane_pair_store(&w->S[68], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[70]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][88]));
+        lane_pair_store(&w->S[70], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[72]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][90]));
+        lane_pair_store(&w->S[72], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[74]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][92]));
+        lane_pair_store(&w->S[74], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[76]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][94]));
+        lane_pair_store(&w->S[76], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[108]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][96]));
+        lane_pair_store(&w->S[108], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[110]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][98]));
+        lane_pair_store(&w->S[110], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[78]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][100]));
+        lane_pair_store(&w->S[78], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[80]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][102]));
+        lane_pair_store(&w->S[80], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[82]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][104]));
+        lane_pair_store(&w->S[82], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[84]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][106]));
+        lane_pair_store(&w->S[84], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[86]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][108]));
+        lane_pair_store(&w->S[86], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&w->S[88]);
+        pair = lane_pair_add_product(pair, lane_pair_of(half, half),
+                lane_pair_load(&w->term[1][110]));
+        lane_pair_store(&w->S[88], pair);
+    }
 }
 
 NED_INERTIAL16_BLOCK ned_inertial16_scalar transition_check(ned_inertial16_transition *restrict t,
@@ -1942,12 +3184,21 @@ NED_INERTIAL16_BLOCK ned_inertial16_scalar transition_check(ned_inertial16_trans
     t->Phi[64] = t->Phi[64] + one;
     t->Phi[80] = t->Phi[80] + one;
     t->Phi[96] = t->Phi[96] + one;
-    t->Phi[109] = t->Phi[109] + one;
-    t->Phi[110] = t->Phi[110] + one;
-    t->Phi[111] = t->Phi[111] + one;
-    t->Phi[112] = t->Phi[112] + one;
-    t->Phi[113] = t->Phi[113] + one;
-    t->Phi[114] = t->Phi[114] + one;
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[109]);
+        pair = lane_pair_add(pair, lane_pair_of(one, one));
+        lane_pair_store(&t->Phi[109], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[111]);
+        pair = lane_pair_add(pair, lane_pair_of(one, one));
+        lane_pair_store(&t->Phi[111], pair);
+    }
+    {
+        lane_pair pair = lane_pair_load(&t->Phi[113]);
+        pair = lane_pair_add(pair, lane_pair_of(one, one));
+        lane_pair_store(&t->Phi[113], pair);
+    }
     v = t->Phi[0] + t->Phi[1] + t->Phi[2] + t->Phi[3] + t->Phi[4] + t->Phi[5] + t->Phi[6] +
             t->Phi[7] + t->Phi[8] + t->Phi[9] + t->Phi[10] + t->Phi[11] + t->Phi[12] + t->Phi[13] +
             t->Phi[14] + t->Phi[15] + t->Phi[16] + t->Phi[17] + t->Phi[18] + t->Phi[19] + t->Phi[20]
@@ -1972,54 +3223,102 @@ NED_INERTIAL16_BLOCK ned_inertial16_scalar transition_check(ned_inertial16_trans
 NED_INERTIAL16_BLOCK void noise_input(const ned_inertial16_matrices *restrict m,
         ned_inertial16_discretize_scratch *restrict w)
 {
-    w->term[0][0] = w->S[6]*m->G[0];
-    w->term[0][1] = w->S[7]*m->G[1];
-    w->term[0][2] = w->S[8]*m->G[2];
-    w->term[0][3] = w->S[9]*m->G[3];
-    w->term[0][4] = w->S[10]*m->G[4];
-    w->term[0][5] = w->S[11]*m->G[5];
-    w->term[0][6] = w->S[18]*m->G[0];
-    w->term[0][7] = w->S[19]*m->G[1];
-    w->term[0][8] = w->S[20]*m->G[2];
-    w->term[0][9] = w->S[21]*m->G[3];
-    w->term[0][10] = w->S[22]*m->G[4];
-    w->term[0][11] = w->S[23]*m->G[5];
-    w->term[0][12] = w->S[30]*m->G[0];
-    w->term[0][13] = w->S[31]*m->G[1];
-    w->term[0][14] = w->S[32]*m->G[2];
-    w->term[0][15] = w->S[33]*m->G[3];
-    w->term[0][16] = w->S[34]*m->G[4];
-    w->term[0][17] = w->S[35]*m->G[5];
-    w->term[0][18] = w->S[42]*m->G[0];
-    w->term[0][19] = w->S[43]*m->G[1];
-    w->term[0][20] = w->S[44]*m->G[2];
-    w->term[0][21] = w->S[45]*m->G[3];
-    w->term[0][22] = w->S[46]*m->G[4];
-    w->term[0][23] = w->S[47]*m->G[5];
-    w->term[0][24] = w->S[54]*m->G[0];
-    w->term[0][25] = w->S[55]*m->G[1];
-    w->term[0][26] = w->S[56]*m->G[2];
-    w->term[0][27] = w->S[57]*m->G[3];
-    w->term[0][28] = w->S[58]*m->G[4];
-    w->term[0][29] = w->S[59]*m->G[5];
-    w->term[0][30] = w->S[66]*m->G[0];
-    w->term[0][31] = w->S[67]*m->G[1];
-    w->term[0][32] = w->S[68]*m->G[2];
-    w->term[0][33] = w->S[69]*m->G[3];
-    w->term[0][34] = w->S[70]*m->G[4];
-    w->term[0][35] = w->S[71]*m->G[5];
-    w->term[0][36] = w->S[78]*m->G[0];
-    w->term[0][37] = w->S[79]*m->G[1];
-    w->term[0][38] = w->S[80]*m->G[2];
-    w->term[0][39] = w->S[81]*m->G[3];
-    w->term[0][40] = w->S[82]*m->G[4];
-    w->term[0][41] = w->S[83]*m->G[5];
-    w->term[0][42] = w->S[84]*m->G[0];
-    w->term[0][43] = w->S[85]*m->G[1];
-    w->term[0][44] = w->S[86]*m->G[2];
-    w->term[0][45] = w->S[87]*m->G[3];
-    w->term[0][46] = w->S[88]*m->G[4];
-    w->term[0][47] = w->S[89]*m->G[5];
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[6]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][0], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[8]), lane_pair_load(&m->G[2]));
+        lane_pair_store(&w->term[0][2], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[10]), lane_pair_load(&m->G[4]));
+        lane_pair_store(&w->term[0][4], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[18]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][6], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[20]), lane_pair_load(&m->G[2]));
+        lane_pair_store(&w->term[0][8], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[22]), lane_pair_load(&m->G[4]));
+        lane_pair_store(&w->term[0][10], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[30]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][12], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[32]), lane_pair_load(&m->G[2]));
+        lane_pair_store(&w->term[0][14], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[34]), lane_pair_load(&m->G[4]));
+        lane_pair_store(&w->term[0][16], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[42]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][18], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[44]), lane_pair_load(&m->G[2]));
+        lane_pair_store(&w->term[0][20], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[46]), lane_pair_load(&m->G[4]));
+        lane_pair_store(&w->term[0][22], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[54]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][24], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[56]), lane_pair_load(&m->G[2]));
+        lane_pair_store(&w->term[0][26], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[58]), lane_pair_load(&m->G[4]));
+        lane_pair_store(&w->term[0][28], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[66]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][30], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[68]), lane_pair_load(&m->G[2]));
+        lane_pair_store(&w->term[0][32], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[70]), lane_pair_load(&m->G[4]));
+        lane_pair_store(&w->term[0][34], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[78]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][36], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[80]), lane_pair_load(&m->G[2]));
+        lane_pair_store(&w->term[0][38], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[82]), lane_pair_load(&m->G[4]));
+        lane_pair_store(&w->term[0][40], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[84]), lane_pair_load(&m->G[0]));
+        lane_pair_store(&w->term[0][42], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[86]), lane_pair_load(&m->G[2]));
+        lane_pair_store(&w->term[0][44], pair);
+    }
+    {
+        lane_pair pair = lane_pair_product(lane_pair_load(&w->S[88]), lane_pair_load(&m->G[4]));
+        lane_pair_store(&w->term[0][46], pair);
+    }
 }
 
 NED_INERTIAL16_BLOCK void process_noise(const ned_inertial16_matrices *restrict m,
@@ -2086,65 +3385,40 @@ NED_INERTIAL16_BLOCK void process_noise(const ned_inertial16_matrices *restrict 
     w->term[1][45] = w->term[0][45]*w->term[1][51];
     w->term[1][46] = w->term[0][46]*w->term[1][52];
     w->term[1][47] = w->term[0][47]*w->term[1][53];
-    t->Qd[7] = 0;
-    t->Qd[8] = 0;
+    lane_pair_store(&t->Qd[7], lane_pair_of(0, 0));
     t->Qd[9] = 0;
-    t->Qd[22] = 0;
-    t->Qd[23] = 0;
+    lane_pair_store(&t->Qd[22], lane_pair_of(0, 0));
     t->Qd[24] = 0;
-    t->Qd[36] = 0;
-    t->Qd[37] = 0;
+    lane_pair_store(&t->Qd[36], lane_pair_of(0, 0));
     t->Qd[38] = 0;
-    t->Qd[49] = 0;
-    t->Qd[50] = 0;
+    lane_pair_store(&t->Qd[49], lane_pair_of(0, 0));
     t->Qd[51] = 0;
-    t->Qd[61] = 0;
-    t->Qd[62] = 0;
+    lane_pair_store(&t->Qd[61], lane_pair_of(0, 0));
     t->Qd[63] = 0;
-    t->Qd[72] = 0;
-    t->Qd[73] = 0;
+    lane_pair_store(&t->Qd[72], lane_pair_of(0, 0));
     t->Qd[74] = 0;
-    t->Qd[82] = 0;
-    t->Qd[83] = 0;
+    lane_pair_store(&t->Qd[82], lane_pair_of(0, 0));
     t->Qd[84] = 0;
-    t->Qd[91] = 0;
-    t->Qd[92] = 0;
-    t->Qd[93] = 0;
-    t->Qd[94] = 0;
-    t->Qd[95] = 0;
-    t->Qd[96] = 0;
-    t->Qd[97] = 0;
-    t->Qd[98] = 0;
-    t->Qd[99] = 0;
-    t->Qd[100] = 0;
-    t->Qd[101] = 0;
-    t->Qd[102] = 0;
-    t->Qd[103] = 0;
-    t->Qd[104] = 0;
-    t->Qd[105] = 0;
-    t->Qd[106] = 0;
-    t->Qd[107] = 0;
-    t->Qd[108] = 0;
-    t->Qd[109] = 0;
-    t->Qd[110] = 0;
-    t->Qd[111] = 0;
-    t->Qd[112] = 0;
-    t->Qd[113] = 0;
-    t->Qd[114] = 0;
-    t->Qd[116] = 0;
-    t->Qd[117] = 0;
-    t->Qd[118] = 0;
-    t->Qd[119] = 0;
+    lane_pair_store(&t->Qd[91], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[93], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[95], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[97], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[99], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[101], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[103], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[105], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[107], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[109], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[111], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[113], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[116], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[118], lane_pair_of(0, 0));
     t->Qd[120] = 0;
-    t->Qd[122] = 0;
-    t->Qd[123] = 0;
-    t->Qd[124] = 0;
-    t->Qd[125] = 0;
-    t->Qd[127] = 0;
-    t->Qd[128] = 0;
+    lane_pair_store(&t->Qd[122], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[124], lane_pair_of(0, 0));
+    lane_pair_store(&t->Qd[127], lane_pair_of(0, 0));
     t->Qd[129] = 0;
-    t->Qd[131] = 0;
-    t->Qd[132] = 0;
+    lane_pair_store(&t->Qd[131], lane_pair_of(0, 0));
     t->Qd[134] = 0;
 }
 

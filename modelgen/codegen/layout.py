@@ -147,9 +147,9 @@ class UnrolledDiscretizeSizes:
 def _unrolled_discretize_scratch(prefix: str, sizes: ModelSizes, unrolled: UnrolledDiscretizeSizes, N: Dim, nnz_f: Dim) -> tuple[Field, ...]:
     """Members of the unrolled discretize's scratch: compressed terms, S, F h and (run-time balancing) its sums."""
     fields = (
-        Field("term", (Dim("2", 2), Dim(f"{prefix}_N_TERMS", unrolled.terms)), "the Horner chain's odd levels R_k (term[1]); the doubling's new values; S G"),
+        Field("term", (Dim("2", 2), Dim(f"{prefix}_N_TERMS", unrolled.terms)),
+              "the Horner chain's odd levels R_k (term[1]) and F h (term[0], each entry twice); the doubling's new values; S G"),
         Field("S", (Dim(f"{prefix}_N_ACTIVE_ENTRIES", unrolled.active),), "S = sum (F h)^k / (k + 1)! (and the even levels R_k): each block row's dense segment, then the diagonal rows"),
-        Field("fh", (nnz_f,), "F h at the nonzeros of F"),
     )
     if not unrolled.balancing:
         return fields

@@ -190,10 +190,9 @@ typedef struct {
 /* Scratch memory of discretize. */
 typedef struct {
     ned_doppler18_scalar term[2][NED_DOPPLER18_N_TERMS]; /* the Horner chain's odd levels R_k
-            (term[1]); the doubling's new values; S G */
+            (term[1]) and F h (term[0], each entry twice); the doubling's new values; S G */
     ned_doppler18_scalar S[NED_DOPPLER18_N_ACTIVE_ENTRIES]; /* S = sum (F h)^k / (k + 1)! (and the
             even levels R_k): each block row's dense segment, then the diagonal rows */
-    ned_doppler18_scalar fh[NED_DOPPLER18_NNZ_F]; /* F h at the nonzeros of F */
     ned_doppler18_scalar row_sum[NED_DOPPLER18_N_STATES]; /* balancing: off-diagonal row sums of
             D^-1 |F| D */
     ned_doppler18_scalar col_sum[NED_DOPPLER18_N_STATES]; /* balancing: off-diagonal column sums of

@@ -243,8 +243,14 @@ class DiscretizePlan:
 
     @property
     def term_size(self) -> int:
-        """Entries of each of the two term arrays: the odd levels of the chain, the doubling's new values (active entries), S G and T q."""
-        return max(self.segment_size, len(self.active), len(self.gamma_entries) + self.structure.G.shape[1], 1)
+        """Entries of each of the two term arrays: the odd levels of the chain, the doubling's new values (active entries), S G and T q.
+
+        During the chain term[0] holds F h, each entry twice from its first 16-byte
+        aligned entry (a lane pair: the C reads it broadcast with one aligned load),
+        so it has room for those too.
+        """
+        return max(self.segment_size, len(self.active), len(self.gamma_entries) + self.structure.G.shape[1],
+                   2 * len(self.f_entries) + 1, 1)
 
     @property
     def active_size(self) -> int:

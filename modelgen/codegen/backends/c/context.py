@@ -6,7 +6,8 @@ import math
 from pathlib import Path
 
 from modelgen.codegen.backends.c.literals import c_number, scalar_bytes, scalar_spellings
-from modelgen.codegen.backends.c.printer import POINTERS, CPrinter, accessors, c_declarator, c_lines, c_ref, c_statement
+from modelgen.codegen.backends.c.printer import (POINTERS, CPrinter, accessors, c_declarator, c_lines, c_pair, c_paired_pointer, c_ref,
+                                                c_statement, paired)
 from modelgen.codegen.description import FilterDescription, named
 from modelgen.codegen.discretize_kernels import HORNER_LAST, DiscretizeBlock, SegmentAssign, horner_level_name, scalar_statements
 from modelgen.codegen.kernels import MIN_LANE_PAIRS, Assign, CheckedAssign, KernelBlock, Ref, compact_predict_tables, lane_split
@@ -234,10 +235,11 @@ def compact_tables(description: FilterDescription) -> dict[str, list[int]]:
     return compact_predict_tables(description.structure) if description.compact else {}
 
 
-def _segment_ref(ref) -> str:
-    """``w->S[16+k]``: entry k of the segment that starts at ``ref`` (no space inside the index: lines wrap at spaces)."""
+def _segment_ref(ref, step: int | None = None) -> str:
+    """``w->S[16+k]``: entry k of the segment that starts at ``ref`` (no space inside the index: lines wrap at spaces); entry ``step`` if given."""
     *head, offset = ref.index
-    return f"{POINTERS[ref.owner]}->{ref.array}" + "".join(f"[{i}]" for i in head) + (f"[{offset}+k]" if offset else "[k]")
+    index = f"[{offset + step}]" if step is not None else (f"[{offset}+k]" if offset else "[k]")
+    return f"{POINTERS[ref.owner]}->{ref.array}" + "".join(f"[{i}]" for i in head) + index
 
 
 def _shift(ref: Ref) -> Ref:
@@ -245,32 +247,96 @@ def _shift(ref: Ref) -> Ref:
 
 
 def _column_pair(first, second) -> bool:
-    """Whether two scalar statements are one in two lanes: x[p] and x[p+1], each term a common factor times y[q] and y[q+1].
+    """Whether two scalar statements are one in two lanes: x[p] and x[p+1], term by term the same shape.
 
-    Then both are one lane-pair sum with the common factors broadcast, term by
-    term in the same order in each lane (the same bits); the target is read
-    by no term (no aliasing between the lanes).
+    Each factor is the same in both statements (broadcast into the two lanes)
+    or y[q] in the first and y[q+1] in the second (a pair); a term is a
+    product of two factors or one factor.  Then both are one lane-pair sum,
+    term by term in the same order in each lane (the same bits): E's unit
+    columns S A(:, j), and the sparse terms of the Horner levels such as
+    R(i, c) = R(i, c) + A(i, c) R(c, c) over consecutive i and c.  The target
+    array is read only as each statement's own target (x[p] = x[p] + ...), so
+    the lanes do not alias; two empty sums are a pair of zeros.  Entries e and
+    e + 1 of F h (stored as lane pairs, not next to each other) are gathered,
+    but not in a sum added to its target, which gcc -O2 pairs better itself
+    (bench/bench_cycle.py).
     """
-    if not (type(first) is Assign and type(second) is Assign) or len(first.terms) != len(second.terms) or not first.terms:
+    if not (type(first) is Assign and type(second) is Assign) or len(first.terms) != len(second.terms):
         return False
-    if not first.target.index or second.target != _shift(first.target):
+    if not first.target.index or second.target != _shift(first.target) or paired(first.target):
         return False
+    own = (first.target.owner, first.target.array)
+    accumulates = any(first.target in t for t in first.terms)
     for a, b in zip(first.terms, second.terms):
-        if len(a) != 2 or len(b) != 2 or a[0] != b[0] or not a[1].index or b[1] != _shift(a[1]):
+        if len(a) != len(b) or not 1 <= len(a) <= 2:
             return False
-        if (a[0].owner, a[0].array) == (first.target.owner, first.target.array) or \
-                (a[1].owner, a[1].array) == (first.target.owner, first.target.array):
-            return False
+        for x, y in zip(a, b):
+            if (x.owner, x.array) == own and (x, y) != (first.target, second.target):
+                return False
+            if x != y and (x.owner == "local" or not x.index or y != _shift(x) or (paired(x) and accumulates)):
+                return False
     return True
 
 
-def _column_pair_lines(first) -> list[str]:
-    """The C of two statements of :func:`_column_pair` (``first`` and its shift), as one lane-pair sum stored once."""
-    (f, s), *rest = first.terms
-    lines = ["{", f"    lane_pair pair = lane_pair_product(lane_pair_of({c_ref(f)}, {c_ref(f)}), lane_pair_load(&{c_ref(s)}));"]
-    lines += [f"    pair = lane_pair_add_product(pair, lane_pair_of({c_ref(f)}, {c_ref(f)}), lane_pair_load(&{c_ref(s)}));"
-              for f, s in rest]
+def _lane_operand(x, y) -> str:
+    """Factors x (first lane) and y (second lane) of :func:`_column_pair` as one lane pair."""
+    if x == y:
+        return _broadcast(x)
+    return f"lane_pair_of({c_ref(x)}, {c_ref(y)})" if paired(x) else f"lane_pair_load(&{c_ref(x)})"
+
+
+def _column_pair_lines(first, second) -> list[str]:
+    """The C of two statements of :func:`_column_pair`, as one lane-pair sum stored once."""
+    if not first.terms:
+        return [f"lane_pair_store(&{c_ref(first.target)}, lane_pair_of(0, 0));"]
+    lines = ["{"]
+    for n, (a, b) in enumerate(zip(first.terms, second.terms)):
+        operands = [_lane_operand(x, y) for x, y in zip(a, b)]
+        if n == 0:
+            value = f"lane_pair_product({operands[0]}, {operands[1]})" if len(operands) == 2 else operands[0]
+            lines.append(f"    lane_pair pair = {value};")
+        elif len(operands) == 2:
+            lines.append(f"    pair = lane_pair_add_product(pair, {operands[0]}, {operands[1]});")
+        else:
+            lines.append(f"    pair = lane_pair_add(pair, {operands[0]});")
     return lines + [f"    lane_pair_store(&{c_ref(first.target)}, pair);", "}"]
+
+
+def _broadcast(factor) -> str:
+    """A scalar factor in both lanes: one aligned load of a paired entry (its two copies), else the value twice."""
+    return c_pair(factor) if paired(factor) else f"lane_pair_of({c_ref(factor)}, {c_ref(factor)})"
+
+
+def _pair_loop(s) -> bool:
+    """Whether a segment is summed as lane pairs, two entries a step: even length, each factor a paired entry.
+
+    The same products summed in the same order in each lane as the scalar loop
+    (the same bits); the factor is read broadcast from its two stored copies
+    with one aligned load, where gcc -O2 vectorizing the scalar loop itself
+    broadcasts every factor on entry to the function and, with more factors
+    than registers, spills and reloads them (bench/bench_cycle.py: 70 fewer
+    instructions per saturated Horner level on the paper's model).
+    """
+    return s.length % 2 == 0 and bool(s.terms) and all(paired(factor) for factor, _ in s.terms)
+
+
+#: Pair segments of at most this many entries are printed step by step, not as a loop: in a loop of so few
+#: steps whose stores cannot alias F h (E = A S into Phi), gcc -O2 hoists the factors' loads out of it and
+#: spills them to the stack (bench/bench_cycle.py: 47 fewer instructions in horner_transition at 18 states).
+UNROLLED_PAIR_LENGTH = 6
+
+
+def _pair_segment_lines(s, step: int | None = None) -> list[str]:
+    """A segment of :func:`_pair_loop` at entries k, k + 1 (``step``, step + 1 if given): one lane-pair sum, stored once."""
+    target = _segment_ref(s.target, step)
+    products = [(c_pair(factor), f"lane_pair_load(&{_segment_ref(source, step)})") for factor, source in s.terms]
+    if s.accumulate:
+        lines = [f"lanes = lane_pair_load(&{target});"]
+        lines += [f"lanes = lane_pair_add_product(lanes, {a}, {b});" for a, b in products]
+    else:
+        lines = [f"lanes = lane_pair_product({products[0][0]}, {products[0][1]});"]
+        lines += [f"lanes = lane_pair_add_product(lanes, {a}, {b});" for a, b in products[1:]]
+    return lines + [f"lane_pair_store(&{target}, lanes);"]
 
 
 def discretize_lines(statements, read_back: bool = False, two_lanes: bool = False) -> list[str]:
@@ -280,25 +346,44 @@ def discretize_lines(statements, read_back: bool = False, two_lanes: bool = Fals
     sources) is the shape gcc -O2 vectorizes with its very cheap cost model;
     one loop for all rows loads each source segment once per step.
     """
-    lines = ["int k;"] if any(isinstance(s, SegmentAssign) for s in statements) else []
+    lines: list[str] = []
     loop = None  # the length of the loop being printed (consecutive segments of one length share it)
     statements = list(statements)
-    paired = set()  # the second statements of column pairs, printed with the first
+    paired_second = set()  # the second statements of column pairs, printed with the first
+    short = [isinstance(s, SegmentAssign) and _pair_loop(s) and s.length <= UNROLLED_PAIR_LENGTH for s in statements]
     for n, s in enumerate(statements):
-        if n in paired:
+        if n in paired_second:
+            continue
+        if short[n]:  # with the short pair segments after it of its length, step by step
+            if loop is not None:
+                lines.append("}")
+                loop = None
+            run = [n]
+            while run[-1] + 1 < len(statements) and short[run[-1] + 1] and statements[run[-1] + 1].length == s.length:
+                run.append(run[-1] + 1)
+            for step in range(0, s.length, 2):
+                lines += ["{", "    lane_pair lanes;"]
+                lines += [f"    {line}" for m in run for line in _pair_segment_lines(statements[m], step)]
+                lines.append("}")
+            paired_second.update(run[1:])
             continue
         if not read_back and n + 1 < len(statements) and _column_pair(s, statements[n + 1]):
             if loop is not None:
                 lines.append("}")
                 loop = None
-            lines += _column_pair_lines(s)
-            paired.add(n + 1)
+            lines += _column_pair_lines(s, statements[n + 1])
+            paired_second.add(n + 1)
             continue
         if isinstance(s, SegmentAssign):
-            if loop != s.length:
+            pairs = _pair_loop(s)
+            if loop != (s.length, pairs):
                 lines += ["}"] if loop is not None else []
-                lines.append(f"for (k = 0; k < {s.length}; ++k) {{")
-                loop = s.length
+                lines.append(f"for (k = 0; k < {s.length}; k += 2) {{" if pairs else f"for (k = 0; k < {s.length}; ++k) {{")
+                lines += ["    lane_pair lanes;"] if pairs else []
+                loop = (s.length, pairs)
+            if pairs:
+                lines += [f"    {line}" for line in _pair_segment_lines(s)]
+                continue
             value = " + ".join(f"{c_ref(factor)}*{_segment_ref(source)}" for factor, source in s.terms) if s.terms else "0"
             target = _segment_ref(s.target)
             lines.append(f"    {target} = {target + ' + ' if s.accumulate else ''}{value};")
@@ -308,6 +393,8 @@ def discretize_lines(statements, read_back: bool = False, two_lanes: bool = Fals
             loop = None
         lines += c_lines(s, read_back, two_lanes)
     lines += ["}"] if loop is not None else []
+    if any(line.startswith("for (k = 0;") for line in lines):
+        lines.insert(0, "int k;")
     if read_back:  # the block's check: the sum of what it stored, read back after the stores
         lines.append("check = " + " + ".join(c_ref(s.targets[0]) for s in statements if isinstance(s, CheckedAssign)) + ";")
     return lines
@@ -341,7 +428,7 @@ def discretize_functions(blocks: list[DiscretizeBlock], prefix: str, scalar: str
                     (name, c_number(float(num), scalar) + (f" / {c_number(float(den), scalar)}" if den != 1 else ""))
                     for name, num, den in b.constants
                 ],
-                "lines": discretize_lines(statements, b.block.read_back, b.block.two_lanes),
+                "lines": _paired_pointers(scalars, prefix) + discretize_lines(statements, b.block.read_back, b.block.two_lanes),
                 "lane_pairs": two_lane_sums(b.block),
                 "small": small_block(statements),
                 "checked": b.block.checked,
@@ -349,6 +436,14 @@ def discretize_functions(blocks: list[DiscretizeBlock], prefix: str, scalar: str
             }
         )
     return out
+
+
+def _paired_pointers(scalars, prefix: str) -> list[str]:
+    """The declaration of the pointer to the lane pairs of F h where a block reads or writes them (printer.PAIRED)."""
+    targets = [t for s in scalars for t in (s.targets if hasattr(s, "targets") else (s.target,))]
+    refs = targets + [r for s in scalars for term in s.terms for r in term]
+    first = next((r for r in refs if paired(r)), None)
+    return [c_paired_pointer(first, f"{prefix}_scalar", any(paired(t) for t in targets))] if first else []
 
 
 def _norm_rows(structure: FilterStructure) -> list[tuple[int, list[tuple[int, int]]]]:
@@ -365,6 +460,40 @@ def _scaled_norm_rows(structure: FilterStructure, scaling: tuple[int, ...], scal
         (i, [(e, c_number(2.0 ** (scaling[j] - scaling[i]), scalar) if scaling[j] != scaling[i] else None) for e, j in entries])
         for i, entries in _norm_rows(structure)
     ]
+
+
+def _balanced_norm_lines(rows: list[tuple[int, list[tuple[int, str | None]]]], scalar: str, scalar_type: str) -> list[str]:
+    """The body of the unrolled ||F||_D = max_i sum_j |F_ij| d_j / d_i: two rows at a time, one in each lane.
+
+    Each lane sums its row's terms in the reference's order (the same bits as
+    one row at a time); the shorter row's lane adds zeros past its end (exact:
+    the terms are not negative) and a factor of 1 multiplies where the other
+    lane's term has a factor (exact).  The rows are paired longest first; F is
+    finite here (discretize refused it otherwise), so the maximum does not
+    depend on the order of the rows.  One product and one sum per two terms
+    (bench/bench_cycle.py: 36 fewer instructions per cycle at 18 states).
+    """
+    fabs = "fabsf" if scalar == "float" else "fabs"
+    one, zero = c_number(1.0, scalar), c_number(0.0, scalar)
+    ordered = sorted(rows, key=lambda row: -len(row[1]))
+    lines = ["lane_pair lanes;"] if len(ordered) > 1 else []
+    for k in range(0, len(ordered) - 1, 2):
+        (_, a), (_, b) = ordered[k], ordered[k + 1]
+        for n in range(len(a)):
+            (ea, fa), (eb, fb) = a[n], b[n] if n < len(b) else (None, None)
+            value = f"lane_pair_of({fabs}(m->F[{ea}]), " + (f"{fabs}(m->F[{eb}]))" if eb is not None else f"{zero})")
+            if fa is not None or fb is not None:
+                factor = f"lane_pair_of({fa or one}, {fb or one})"
+                lines.append(f"lanes = lane_pair_product({value}, {factor});" if n == 0 else
+                             f"lanes = lane_pair_add_product(lanes, {value}, {factor});")
+            else:
+                lines.append(f"lanes = {value};" if n == 0 else f"lanes = lane_pair_add(lanes, {value});")
+        lines.append("norm = lane_pair_max(lanes, norm);")
+    if len(ordered) % 2:
+        _, entries = ordered[-1]
+        lines.append(f"const {scalar_type} v = " + " + ".join(f"{fabs}(m->F[{e}])" + (f" * {f}" if f else "") for e, f in entries) + ";")
+        lines.append("norm = v > norm ? v : norm;")
+    return lines
 
 
 def _balance_states(structure: FilterStructure) -> list[tuple[int, str]]:
@@ -573,7 +702,8 @@ def c_context(description: FilterDescription) -> dict[str, object]:
         "balance_states": _balance_states(structure),
         "norm_rows": _norm_rows(structure),
         "balance_scaling": list(scaling) if scaling is not None else None,
-        "scaled_norm_rows": _scaled_norm_rows(structure, scaling, options.scalar) if scaling is not None else [],
+        "balanced_norm_lines": _balanced_norm_lines(_scaled_norm_rows(structure, scaling, options.scalar), options.scalar,
+                                                    f"{model.name}_scalar") if scaling is not None else [],
         "discretize_sizes": {"terms": unrolled.term_size, "active": unrolled.active_size} if unrolled else {},
         "discretize_blocks": discretize,
         "discretize_calls": {f["name"]: f["call"] for f in discretize},

@@ -42,11 +42,39 @@ class CPrinter(RenamedSymbols, C99CodePrinter):
         return text if text is not None else super()._print_Pow(expr)
 
 
-def c_ref(ref: Ref) -> str:
-    """``t->Phi[3][4]``: a kernel entry through its owner's pointer (a ``local`` scalar by its name)."""
+#: Kernel arrays the C stores as lane pairs, each entry twice, in another array: F h lives in term[0] during the
+#: Horner chain (which uses term[1] and S only; term[0] is next written by the doublings and S G), entry e at
+#: fh_pairs[2 e] and fh_pairs[2 e + 1], fh_pairs = term[0] or term[0] + 1, whichever is 16-byte aligned
+#: (:data:`PAIRED_POINTER`), so that a loop reads it broadcast with one aligned load (:func:`c_pair`).
+PAIRED = {("scratch", "fh"): ("term", 0)}
+PAIRED_POINTER = "fh_pairs"
+
+
+def paired(ref: Ref) -> bool:
+    """Whether ``ref`` is an entry of an array stored as lane pairs (:data:`PAIRED`)."""
+    return (ref.owner, ref.array) in PAIRED
+
+
+def c_ref(ref: Ref, lane: int = 0) -> str:
+    """``t->Phi[3][4]``: a kernel entry through its owner's pointer (a ``local`` scalar by its name; of a paired array, ``lane``)."""
     if ref.owner == "local":
         return ref.array
+    if paired(ref):
+        return f"{PAIRED_POINTER}[{2 * ref.index[0] + lane}]"
     return f"{POINTERS[ref.owner]}->{ref.array}" + "".join(f"[{i}]" for i in ref.index)
+
+
+def c_paired_pointer(ref: Ref, scalar_type: str, written: bool) -> str:
+    """The declaration of :data:`PAIRED_POINTER` for ``ref``'s array: the first 16-byte aligned entry of its storage."""
+    array, row = PAIRED[(ref.owner, ref.array)]
+    storage = f"{POINTERS[ref.owner]}->{array}[{row}]"
+    return f"{'' if written else 'const '}{scalar_type} *{PAIRED_POINTER} = {storage} + lane_pair_offset({storage});"
+
+
+def c_pair(ref: Ref) -> str:
+    """An entry of a paired array broadcast into two lanes: its two stored copies, one aligned load."""
+    assert paired(ref)
+    return f"lane_pair_load_aligned(&{c_ref(ref)})"
 
 
 def c_sum(terms: tuple[Term, ...]) -> str:
@@ -61,6 +89,8 @@ def c_statement(statement: Statement, read_back: bool = False, value: str | None
     """
     value = c_sum(statement.terms) if value is None else value
     if isinstance(statement, Assign):
+        if paired(statement.target):  # both copies, as one store of the value in two lanes (the compiler computes it once)
+            return f"lane_pair_store(&{c_ref(statement.target)}, lane_pair_of({value}, {value}));"
         return f"{c_ref(statement.target)} = {value};"
     assert isinstance(statement, CheckedAssign)
     if read_back:
@@ -74,6 +104,7 @@ def _follows(first: Ref, second: Ref) -> bool:
     """Whether ``second`` is the entry right after ``first`` in memory (same array and row, next index)."""
     return (
         first.owner == second.owner != "local"
+        and not paired(first)  # entry e + 1 of a paired array is not next to entry e's first copy
         and first.array == second.array
         and first.index[:-1] == second.index[:-1]
         and second.index[-1] == first.index[-1] + 1
