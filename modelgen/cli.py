@@ -20,8 +20,10 @@ import subprocess
 import sys
 import traceback
 import warnings
+from contextlib import contextmanager
 from pathlib import Path
 from types import TracebackType
+from typing import Iterator
 
 import click
 
@@ -88,6 +90,47 @@ def _forget_nested_interrupt() -> None:
     exec("pass")  # noqa: S102 - a constant string: resets the flag, runs nothing
 
 
+#: How long after a swallowed Ctrl-C it is delivered again (the hook that saw it has long returned by then).
+REDELIVERY_DELAY_S = 0.01
+
+
+@contextmanager
+def _interrupts_not_swallowed() -> Iterator[None]:
+    """A KeyboardInterrupt that C code swallowed is delivered again, not printed as a traceback.
+
+    Ctrl-C that lands while C calls back into Python (llvmlite's object-cache
+    callback while numba compiles, any ctypes callback) raises inside the
+    callback, where it cannot propagate: CPython hands it to
+    ``sys.unraisablehook``, which printed "Exception ignored ... Traceback" and
+    dropped the interrupt, so the command ran on to exit 0.  Here the hook
+    has SIGINT sent again to the main thread a moment later (from a timer
+    thread: raised in the hook itself it would be swallowed once more, and a
+    real signal also ends a blocking wait), which takes it once the C code has
+    returned (a callback still inside it is handed here again): one "modelgen:
+    interrupted" and exit 130, as for any other Ctrl-C.  Other unraisable
+    errors go to the hook that was there before.
+    """
+    import signal
+    import threading
+
+    previous = sys.unraisablehook
+    main = threading.main_thread().ident
+
+    def hook(unraisable) -> None:
+        if isinstance(unraisable.exc_value, KeyboardInterrupt):
+            again = threading.Timer(REDELIVERY_DELAY_S, signal.pthread_kill, (main, signal.SIGINT))
+            again.daemon = True
+            again.start()
+        else:
+            previous(unraisable)
+
+    sys.unraisablehook = hook
+    try:
+        yield
+    finally:
+        sys.unraisablehook = previous
+
+
 def _mapped_echo(update, err: bool = False):
     """``click.echo`` that shows paths in a report's staging folder as their final paths."""
     return lambda message: click.echo(str(message).replace(str(update.staging), str(update.folder)), err=err)
@@ -117,7 +160,7 @@ class ModelgenGroup(click.Group):
 
     def invoke(self, ctx: click.Context):
         debug = bool(ctx.params.get("debug"))
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), _interrupts_not_swallowed():
             warnings.showwarning = _show_warning
             try:
                 return super().invoke(ctx)
