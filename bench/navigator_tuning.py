@@ -92,7 +92,9 @@ The method and the decision, written before any outage was flown with its result
    their white values, the configuration's white-noise factor).  The fixed point is not unique: from there the
    15-state iteration settles at R_pos x 41 and NHC sigmas of 0.04 m/s instead of R_pos x 20.5 and 0.07/0.17.
    Of the converged fixed points, the one with the higher innovations log-likelihood (GNSS present, every
-   sensor) is shipped -- a choice the innovations make, not the outages.
+   sensor) is shipped -- a choice the innovations make, not the outages.  Its known weakness (seen after the
+   chosen point was flown, so not acted on here): the white log-likelihood counts correlated innovations as
+   independent and so favours the point with the tighter NHC (docs/replay-configuration.md, "Two starts").
 
 The Python navigator flies these flights: it is the one that records every update's innovation and its
 covariance (the generated C navigator does not hand them out).  Each flight's statistics are kept, so the

@@ -79,26 +79,44 @@ class Alignment:
                 "motion_time": self.motion_time}
 
 
-def still_window_samples(config: NavigatorConfig, time: np.ndarray) -> int:
-    """The still detector's window in samples at the log's median rate (at least 2)."""
+def detector_samples(window_s: float, time: np.ndarray) -> int:
+    """A detector window of ``window_s`` seconds in samples at the log's median rate (at least 2)."""
     from modelgen.navigator.cconfig_fields import WINDOW_SAMPLES_MIN
 
-    return max(WINDOW_SAMPLES_MIN, int(round(config.still_window / float(np.median(np.diff(time))))))
+    return max(WINDOW_SAMPLES_MIN, int(round(window_s / float(np.median(np.diff(time))))))
+
+
+def still_window_samples(config: NavigatorConfig, time: np.ndarray) -> int:
+    """The still detector's window in samples at the log's median rate (at least 2)."""
+    return detector_samples(config.still_window, time)
+
+
+def refuse_window_longer_than_log(config: NavigatorConfig, time: np.ndarray, key: str, window_s: float,
+                                  detector: str, consequence: str) -> None:
+    """Refuse a detector window longer than the whole IMU log, naming the line of its key ``key``.
+
+    No sample of such a log can be called still: said as what the configuration asks, not left to a later
+    diagnosis (which names no configuration line), to the C's bound on its buffer (which a window between the
+    log's length and the buffer's power-of-two size passes), or to a flight that silently never uses it."""
+    size = detector_samples(window_s, time)
+    if size > len(time):
+        raise ModelError(f"{key_place(config.path, key)}: {key}: the {detector}'s window of {window_s:g} s "
+                         f"is {size} IMU samples, more than the whole IMU log has ({len(time)} samples, "
+                         f"{float(time[-1] - time[0]):.3g} s): {consequence}; give a window shorter than the log")
 
 
 def check_still_window(config: NavigatorConfig, time: np.ndarray) -> None:
-    """Refuse a still detector window longer than the whole IMU log, naming the line of alignment.still_window_s.
+    """Refuse a still detector window longer than the whole IMU log (the IMU could not be levelled at rest)."""
+    refuse_window_longer_than_log(config, time, "alignment.still_window_s", config.still_window, "still detector",
+                                  "no sample could be called still, so the IMU could not be levelled at rest")
 
-    No sample of such a log can be called still, so no rest window could level the IMU: said as what the
-    configuration asks, not left to the alignment's diagnosis (which names no configuration line) or to the C's
-    bound on its ring (which a window between the log's length and the ring's power-of-two size passes)."""
-    size = still_window_samples(config, time)
-    if size > len(time):
-        key = "alignment.still_window_s"
-        raise ModelError(f"{key_place(config.path, key)}: {key}: the still detector's window of {config.still_window:g} s "
-                         f"is {size} IMU samples, more than the whole IMU log has ({len(time)} samples, "
-                         f"{float(time[-1] - time[0]):.3g} s): no sample could be called still, so the IMU could not "
-                         "be levelled at rest; give a window shorter than the log")
+
+def check_zupt_window(config: NavigatorConfig, time: np.ndarray) -> None:
+    """Refuse an enabled ZUPT whose detector window is longer than the whole IMU log (no ZUPT would be made)."""
+    if config.zupt_enabled:
+        refuse_window_longer_than_log(config, time, "zupt.window_s", config.zupt_window, "zero-velocity detector",
+                                      "it could never call the IMU still, so no ZUPT would be made (or give "
+                                      "zupt.enabled: false)")
 
 
 def still_samples(force: np.ndarray, rate: np.ndarray, size: int, gyro_std_max: float,

@@ -20,7 +20,7 @@ from typing import Any
 
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path
-from modelgen.navigator.config_bases import origin_of, read_config_with_bases
+from modelgen.navigator.config_bases import closest_key, origin_of, read_config_with_bases
 from modelgen.navigator.config_schema import key_sets, validate
 from modelgen.navigator.logs import GAP_ACTIONS, STANDARD_GRAVITY, ImuColumns, LogSource, source_from_config
 from modelgen.navigator.logs.imu_csv import columns_of
@@ -191,9 +191,7 @@ class _Reader:
 
     def where(self, key: str) -> str:
         """'file:line' of a key path, or of the closest enclosing key that has a line."""
-        probe = key
-        while probe and probe not in self.lines:
-            probe = probe.rpartition(".")[0]
+        probe = closest_key(self.lines, key)
         return self.lines[probe] if probe else str(self.path)
 
     def get(self, key: str, default: Any = ...) -> Any:
@@ -394,9 +392,9 @@ def _choice(reader: _Reader, key: str, choices: tuple[str, ...]) -> str:
 
 
 def key_place(config_path: str | Path, key: str) -> str:
-    """``file:line`` of ``key`` (or of its closest enclosing key) in the configuration file at ``config_path``, for a
-    refusal made after loading (from the configuration file alone, as the C and Python navigators' refusals have only its path); the file alone if it cannot be
-    read again."""
+    """``file:line`` of ``key`` (or of its closest enclosing key) in the configuration at ``config_path``, its bases
+    included, for a refusal made where only the configuration's path is at hand; the file alone if it cannot be read
+    again."""
     try:
         data, lines = read_config_with_bases(config_path)  # an inherited key: the line of the base that gives it
     except (ModelError, OSError):

@@ -38,14 +38,18 @@ def read_config_with_bases(path: str | Path) -> tuple[dict[str, Any], dict[str, 
     return _read(Path(path), ())
 
 
-def origin_of(lines: dict[str, str], key: str, default: Path) -> Path:
-    """The file that wrote ``key`` (or its closest enclosing key); relative paths at the key start from its folder."""
+def closest_key(lines: dict[str, str], key: str) -> str:
+    """``key`` if ``lines`` has it, else its closest enclosing key that has, else ''."""
     probe = key
     while probe and probe not in lines:
         probe = probe.rpartition(".")[0]
-    if not probe:
-        return default
-    return Path(lines[probe].rsplit(":", 1)[0])
+    return probe
+
+
+def origin_of(lines: dict[str, str], key: str, default: Path) -> Path:
+    """The file that wrote ``key`` (or its closest enclosing key); relative paths at the key start from its folder."""
+    probe = closest_key(lines, key)
+    return Path(lines[probe].rsplit(":", 1)[0]) if probe else default
 
 
 def _read(path: Path, chain: tuple[Path, ...]) -> tuple[dict[str, Any], dict[str, str]]:

@@ -106,7 +106,7 @@ def prepare(config: NavigatorConfig, imu: ImuLog, gnss: GnssLog) -> Inputs:
                    gnss.sigma_velocity[keep], gnss.notes)
     for log in aiding.values():
         notes.extend(log.notes)
-    from modelgen.navigator.alignment import check_still_window
+    from modelgen.navigator.alignment import check_still_window, check_zupt_window
 
     check_still_window(config, time)  # a window longer than the log, refused before any navigator is built
     check_zupt_window(config, time)
@@ -123,24 +123,6 @@ def read_aiding_logs(config: NavigatorConfig) -> dict[str, ScalarLog]:
             log.time = log.time + settings.time_offset
             out[section] = log
     return out
-
-
-def check_zupt_window(config: NavigatorConfig, time: np.ndarray) -> None:
-    """Refuse an enabled ZUPT whose detector window is longer than the whole IMU log, naming zupt.window_s's line.
-
-    The detector could never call a sample still, so the configuration would fly with no ZUPT at all and say
-    nothing: refused as what the configuration asks, as the still detector's window is (check_still_window)."""
-    if not config.zupt_enabled:
-        return
-    size = max(WINDOW_SAMPLES_MIN, int(round(config.zupt_window / float(np.median(np.diff(time))))))
-    if size > len(time):
-        from modelgen.navigator.config import key_place
-
-        key = "zupt.window_s"
-        raise ModelError(f"{key_place(config.path, key)}: {key}: the zero-velocity detector's window of "
-                         f"{config.zupt_window:g} s is {size} IMU samples, more than the whole IMU log has ({len(time)} "
-                         f"samples, {float(time[-1] - time[0]):.3g} s): it could never call the IMU still, so no ZUPT "
-                         "would be made; give a window shorter than the log, or zupt.enabled: false")
 
 
 def stationary_mask(time: np.ndarray, force: np.ndarray, rate: np.ndarray, gyro_bias: np.ndarray,
