@@ -60,8 +60,19 @@ OUTPUT_NAMES = ("velocity_rate_north", "velocity_rate_east", "velocity_rate_down
 ECEF_INPUT_NAMES = ("x", "y", "z", "v_x", "v_y", "v_z")
 ECEF_OUTPUT_NAMES = ("velocity_rate_x", "velocity_rate_y", "velocity_rate_z", "x_rate", "y_rate", "z_rate",
                      "earth_rate_x", "earth_rate_y", "earth_rate_z")
+#: Where a refusal of the velocity equation points: the equation the file writes, else its mechanization.
+_VELOCITY_KEYS = ("navigation.equations.velocity", "navigation.equations", "navigation.mechanization", "navigation")
 #: The mechanizations the navigator flies (a model of another is refused naming its file).
 FLOWN = ("local_level", "ecef")
+
+
+class RatesRefused(ModelError):
+    """A model the navigator cannot fly by its own rates; ``keys``: the model file's keys that say why, first first
+    (the navigator names the line of the first the file has, :func:`modelgen.navigator.spec.spec_of`)."""
+
+    def __init__(self, message: str, keys: tuple[str, ...]):
+        super().__init__(message)
+        self.keys = keys
 
 
 @dataclass(frozen=True)
@@ -110,8 +121,9 @@ def mechanization_rates(model) -> MechanizationRates:
     if name == "ecef" and frame == "ECEF":
         return _ecef_rates(model, problem)
     if name != "local_level" or frame not in _NED_TO_FRAME:
-        raise ModelError(f"model {model.name}: the navigator flies the local_level mechanization in NED or ENU and "
-                         f"the ecef mechanization in ECEF (this model: {name}, frame {frame or 'none'})")
+        raise RatesRefused(f"model {model.name}: the navigator flies the local_level mechanization in NED or ENU and "
+                           f"the ecef mechanization in ECEF (this model: {name}, frame {frame or 'none'})",
+                           ("navigation.mechanization", "frame", "navigation"))
     mech, position, attitude, body_rate, earth_rate = _equations(problem, frame)
     T = _NED_TO_FRAME[frame]
     latitude, longitude, height = position
@@ -121,8 +133,9 @@ def mechanization_rates(model) -> MechanizationRates:
     state = NavigationState(attitude, velocity, position, force, body_rate, position, position)
     velocity_rate = mech.velocity_rate(state)
     if velocity_rate.jacobian(list(force)) != sp.eye(3):
-        raise ModelError(f"model {model.name}: the navigator integrates the specific force as C_b^n f^b increments: "
-                         "the velocity equation must have the term f_n (plus terms without the specific force)")
+        raise RatesRefused(f"model {model.name}: the navigator integrates the specific force as C_b^n f^b increments: "
+                           "the velocity equation must have the term f_n (plus terms without the specific force)",
+                           _VELOCITY_KEYS)
     earth = {**wgs84_earth_functions(latitude, height), earth_rate: _earth_rate(model, str(earth_rate))}
     rates = MechanizationRates(
         model.name, frame, inputs,
@@ -143,8 +156,9 @@ def _ecef_rates(model, problem) -> MechanizationRates:
     state = NavigationState(attitude, velocity, position, force, body_rate, position, position)
     velocity_rate = mech.velocity_rate(state)
     if velocity_rate.jacobian(list(force)) != sp.eye(3):
-        raise ModelError(f"model {model.name}: the navigator integrates the specific force as C_b^e f^b increments: "
-                         "the velocity equation must have the term f_e (plus terms without the specific force)")
+        raise RatesRefused(f"model {model.name}: the navigator integrates the specific force as C_b^e f^b increments: "
+                           "the velocity equation must have the term f_e (plus terms without the specific force)",
+                           _VELOCITY_KEYS)
     x, y, z = position
     earth = {GeocentricRadius(x, y, z): sp.sqrt(x**2 + y**2 + z**2), earth_rate: _earth_rate(model, str(earth_rate))}
     rates = MechanizationRates(
@@ -181,9 +195,16 @@ def _earth_rate(model, symbol: str) -> sp.Float:
 
 def _refuse_other_symbols(model, rates: MechanizationRates) -> None:
     """Every symbol of the rates must be an input: an attitude, a body rate or a model parameter is refused."""
-    used = set().union(*(e.free_symbols for e in rates.outputs))
-    other = sorted(str(s) for s in used - set(rates.inputs))
-    leftover = sorted(str(a) for e in rates.outputs for a in e.atoms(sp.Function) if isinstance(a, sp.core.function.AppliedUndef))
-    if other or leftover:
-        raise ModelError(f"model {model.name}: the navigator's rates may depend on the position and the velocity only; "
-                         f"its mechanization's also use {', '.join(other + leftover)}")
+    def outside(expressions) -> list[str]:
+        used = set().union(*(e.free_symbols for e in expressions))
+        other = sorted(str(s) for s in used - set(rates.inputs))
+        return other + sorted(str(a) for e in expressions for a in e.atoms(sp.Function)
+                              if isinstance(a, sp.core.function.AppliedUndef))
+
+    found = outside(rates.outputs)
+    if found:
+        # the line of the equation that uses them: the velocity's (w_in comes with it), else the position's
+        keys = ((_VELOCITY_KEYS if outside([*rates.velocity, *rates.navigation_rate]) else ())
+                + ("navigation.equations.position", "navigation.equations", "navigation.mechanization", "navigation"))
+        raise RatesRefused(f"model {model.name}: the navigator's rates may depend on the position and the velocity only; "
+                           f"its mechanization's also use {', '.join(found)}", keys)

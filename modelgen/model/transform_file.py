@@ -38,13 +38,17 @@ STEPS = {
 }
 
 
-def _items(cls: type, raw: Any, where: str) -> list:
+def _items(cls: type, raw: Any, where: str, lines: Mapping[str, str] | None = None, key: str = "") -> list:
+    """The declarations of an ``augment`` list; each carries the line of its entry (``lines[key[j]]``) as its place."""
     if raw is None:
         return []
     if not isinstance(raw, list) or not all(isinstance(e, dict) and "name" in e for e in raw):
         raise ModelError(f"{where}: must be a list of mappings, each with a 'name'")
+    lines = lines or {}
     try:
-        return [cls(**{k: (str(v) if k in {"psd", "expression", "variance"} else v) for k, v in e.items()}) for e in raw]
+        return [cls(**{k: (str(v) if k in {"psd", "expression", "variance"} else v) for k, v in e.items()},
+                    places={"": lines[f"{key}[{j}]"]} if lines.get(f"{key}[{j}]") else {})
+                for j, e in enumerate(raw)]
     except TypeError as exc:
         raise ModelError(f"{where}: {exc}") from None
 
@@ -55,8 +59,9 @@ def _names(raw: Any, where: str) -> list[str]:
     return raw
 
 
-def _apply(model: ErrorModel, step: str, args: Mapping[str, Any], where: str) -> ErrorModel:
-    """One transformation step; intermediate models get generated names."""
+def _apply(model: ErrorModel, step: str, args: Mapping[str, Any], where: str, lines: Mapping[str, str] | None = None,
+           key: str = "") -> ErrorModel:
+    """One transformation step; intermediate models get generated names; ``key``: the step's key in ``lines``."""
     try:
         if step == "keep_states":
             return transform.keep_states(
@@ -71,10 +76,10 @@ def _apply(model: ErrorModel, step: str, args: Mapping[str, Any], where: str) ->
             )
         return transform.augment(
             model,
-            _items(State, args.get("states"), f"{where}.states"),
+            _items(State, args.get("states"), f"{where}.states", lines, f"{key}.states"),
             equations={k: str(v) for k, v in (args.get("equations") or {}).items()},
-            noises=_items(Noise, args.get("noises"), f"{where}.noises"),
-            parameters=_items(Parameter, args.get("parameters"), f"{where}.parameters"),
+            noises=_items(Noise, args.get("noises"), f"{where}.noises", lines, f"{key}.noises"),
+            parameters=_items(Parameter, args.get("parameters"), f"{where}.parameters", lines, f"{key}.parameters"),
             measurement_terms={k: str(v) for k, v in (args.get("measurement_terms") or {}).items()} or None,
             name=f"{model.name}_augmented",
         )
@@ -109,7 +114,7 @@ def load_transformed_model(
         extra = sorted(set(args) - STEPS[step])
         if extra:
             raise ModelError(f"{where}: {step} has unknown argument {extra[0]!r} (allowed: {sorted(STEPS[step])})")
-        model = _apply(model, step, args, f"{where} ({step})")
+        model = _apply(model, step, args, f"{where} ({step})", lines, f"transforms[{i}].{step}")
     name = str(data["model"])
     check_identifier(name, f"{lines.get('model', filename)}: model name", model_name=True)
     title = free_text(data, "title", lines, filename, model.title)

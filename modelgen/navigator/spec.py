@@ -57,7 +57,7 @@ from typing import Sequence
 import numpy as np
 
 from modelgen.codegen.mechanization import c_source, python_source
-from modelgen.derivation.mechanization_rates import mechanization_rates
+from modelgen.derivation.mechanization_rates import RatesRefused, mechanization_rates
 from modelgen.derivation.symbolic import is_identically_zero
 from modelgen.errors import ModelError
 from modelgen.model.ned_enu import NED_TO_ENU
@@ -517,8 +517,8 @@ def spec_of(derived, model_file: Path, with_python: bool = True) -> NavigatorSpe
     where = str(model_file)
     frame = str(model.frame or "").upper()
     if frame not in ("NED", "ENU", "ECEF"):
-        raise ModelError(f"{where}: the navigator flies models in the NED, ENU or ECEF frame (model {model.name} "
-                         f"declares {model.frame or 'no frame'})")
+        raise ModelError(f"{_line_of(model_file, ('frame', 'navigation.mechanization'))}: the navigator flies models in "
+                         f"the NED, ENU or ECEF frame (model {model.name} declares {model.frame or 'no frame'})")
     _check_forms(model_file)
     names = list(model.state_names)
     blocks = _blocks(names, frame, where, [s.place() for s in model.states])
@@ -527,7 +527,7 @@ def spec_of(derived, model_file: Path, with_python: bool = True) -> NavigatorSpe
     defaults = {k: float(v) for k, v in model.parameter_defaults().items()}
     expressions = {p: QUANTITIES[p] for p in parameter_names if p in QUANTITIES and p not in defaults}
     free = tuple(p for p in parameter_names if p not in expressions)
-    rates = _rates(model, where)
+    rates = _rates(model, model_file)
     if frame == "ECEF":
         _check_ecef(model_file, blocks, rows)
     carried = _carried(derived, blocks, where)
@@ -542,12 +542,26 @@ def spec_of(derived, model_file: Path, with_python: bool = True) -> NavigatorSpe
     return spec
 
 
-def _rates(model, where: str):
-    """The model's own mechanization rates (one source with its error model), refusals naming the file."""
+def _rates(model, model_file: Path):
+    """The model's own mechanization rates (one source with its error model), refusals naming the line of the model
+    file's key that says why (its velocity equation, its mechanization ...), else the file."""
     try:
         return mechanization_rates(model)
+    except RatesRefused as exc:
+        raise ModelError(f"{_line_of(model_file, exc.keys)}: {exc}") from None
     except ModelError as exc:
-        raise ModelError(f"{where}: {exc}") from None
+        raise ModelError(f"{model_file}: {exc}") from None
+
+
+def _line_of(model_file: Path, keys: Sequence[str]) -> str:
+    """``file:line`` of the first of ``keys`` (dotted) the model file has, else the file's name."""
+    from modelgen.fileio.datafiles import read_yaml_with_lines
+
+    try:
+        _, lines = read_yaml_with_lines(model_file, "model file")
+    except ModelError:
+        return str(model_file)  # the loader has read it already; nothing more to say here
+    return next((lines[k] for k in keys if lines.get(k)), str(model_file))
 
 
 def _check_ecef(model_file: Path, blocks: dict[str, Block], rows: tuple[GnssRow, ...]) -> None:
@@ -588,7 +602,8 @@ def _check_forms(model_file: Path) -> None:
     attitude = (errors.get("attitude") or {}).get("form", "phi") if isinstance(errors, dict) else "phi"
     velocity = (errors.get("velocity") or {}).get("form", "difference") if isinstance(errors, dict) else "difference"
     if attitude != "phi" or velocity != "difference":
-        raise ModelError(f"{model_file}: the navigator feeds back phi-angle attitude errors and velocity "
+        keys = ("navigation.errors.attitude.form",) if attitude != "phi" else ("navigation.errors.velocity.form",)
+        raise ModelError(f"{_line_of(model_file, (*keys, 'navigation.errors', 'navigation'))}: the navigator feeds back phi-angle attitude errors and velocity "
                          f"differences (navigation.errors: attitude {attitude!r}, velocity {velocity!r})")
 
 

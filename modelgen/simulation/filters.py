@@ -429,8 +429,10 @@ def named_parameters(derived: DerivedModel, available: Mapping[str, float], vali
 
         missing = [p for p in derived.model.parameters if p.name not in chosen and p.value is None]
         if missing:
-            raise ModelError(unsupplied_parameters_message(derived.model.name, [f"{p.name} ({p.symbol})" for p in missing],
-                                                           sorted(available)))
+            at = next((p.place() for p in missing if p.place()), "")  # the first declaration that gives no value
+            raise ModelError((f"{at}: " if at else "")
+                             + unsupplied_parameters_message(derived.model.name, [f"{p.name} ({p.symbol})" for p in missing],
+                                                             sorted(available)))
         parameter_vector(derived.model, chosen)
     return chosen
 
