@@ -73,30 +73,57 @@ def read_yaml_with_lines(path: str | Path, what: str = "data file") -> tuple[dic
     try:
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError as exc:
-        raise ModelError(f"{path}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
+        line = exc.object[:exc.start].count(b"\n") + 1
+        raise ModelError(f"{path}:{line}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
     try:
         data = yaml.safe_load(text)
         lines = key_lines(text, str(path))
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
-        raise ModelError(f"{where}: not valid YAML ({getattr(exc, 'problem', None) or exc})") from None
+        mark, context = getattr(exc, "problem_mark", None), getattr(exc, "context_mark", None)
+        last = max(len(text.splitlines()), 1)  # the stream's end is past the last line: name the last one
+        where = f"{path}:{min(mark.line + 1, last)}" if mark is not None else str(path)
+        opened = (f"; {exc.context} at line {context.line + 1}"
+                  if context is not None and getattr(exc, "context", None) and mark is not None
+                  and context.line != mark.line else "")
+        raise ModelError(f"{where}: not valid YAML ({getattr(exc, 'problem', None) or exc}{opened})") from None
     except RecursionError:
         raise ModelError(f"{path}: nested too deeply to read") from None
+    except ModelError:  # a key given twice (key_lines); a ModelError is a ValueError, not a too long number
+        raise
     except ValueError as exc:  # an integer of over 4300 digits (Python's limit on int(str))
         digits = re.search(r"[0-9]{4301,}", text)  # the loader's error has no mark: the line of the first such run
         where = f"{path}:{text.count(chr(10), 0, digits.start()) + 1}" if digits else str(path)
         raise ModelError(f"{where}: a number too long to read ({exc})") from None
     if not isinstance(data, dict):
-        raise ModelError(f"{path}: expected a mapping at the top level")
+        raise ModelError(f"{path}:{_first_content_line(text)}: expected a mapping at the top level, got "
+                         f"{_kind(data)}")
     return data, lines
+
+
+def _first_content_line(text: str) -> int:
+    """The first line of ``text`` that holds YAML content (not blank, a comment or a directive), else 1."""
+    for number, line in enumerate(text.splitlines(), start=1):
+        stripped = line.strip()
+        if stripped and not stripped.startswith(("#", "%")) and stripped != "---":
+            return number
+    return 1
+
+
+def _kind(value: Any) -> str:
+    """What a YAML document that is not a mapping holds, in words."""
+    if value is None:
+        return "nothing (an empty document)"
+    if isinstance(value, list):
+        return "a list"
+    return f"a {type(value).__name__} ({str(value)[:40]!r})"
 
 
 def key_lines(text: str, filename: str) -> dict[str, str]:
     """``file:line`` of every key and list item, by dotted path (``doppler.period_s``, ``segments[0].duration_h``).
 
     An aliased node is walked once (at its anchor), so an alias bomb costs
-    no more than its text.
+    no more than its text.  A key given twice in one mapping is refused at its second line (YAML would keep the
+    second value silently, and the first's line).
     """
     root = yaml.compose(text, Loader=yaml.SafeLoader)
     lines: dict[str, str] = {}
@@ -108,9 +135,16 @@ def key_lines(text: str, filename: str) -> dict[str, str]:
             continue
         seen.add(id(node))
         if isinstance(node, yaml.MappingNode):
+            first: dict[str, int] = {}
             for key, value in node.value:
                 sub = f"{path}.{key.value}" if path else str(key.value)
-                lines.setdefault(sub, f"{filename}:{key.start_mark.line + 1}")
+                line = key.start_mark.line + 1
+                if isinstance(key, yaml.ScalarNode) and key.tag != "tag:yaml.org,2002:merge":
+                    if key.value in first:  # YAML keeps the last silently, and a refusal would name the first's line
+                        raise ModelError(f"{filename}:{line}: key {sub!r} appears twice (first at line "
+                                         f"{first[key.value]})")
+                    first[key.value] = line
+                lines.setdefault(sub, f"{filename}:{line}")
                 pending.append((value, sub))
         elif isinstance(node, yaml.SequenceNode):
             for i, item in enumerate(node.value):

@@ -18,6 +18,8 @@ a file is refused at its line.
 
 from __future__ import annotations
 
+import difflib
+import errno
 from pathlib import Path
 from typing import Any
 
@@ -62,29 +64,75 @@ def _read(path: Path, chain: tuple[Path, ...]) -> tuple[dict[str, Any], dict[str
     if base.resolve() in resolved or base.resolve() == path.resolve():
         raise ModelError(f"{where}: extends {data['extends']!r}: the configurations extend each other in a cycle "
                          f"({' -> '.join(p.name for p in (*chain, path, base))})")
-    if len(chain) + 1 >= MAX_DEPTH:
+    if len(chain) + 1 > MAX_DEPTH:  # ``base`` would be base number len(chain) + 1 of the configuration read first
         raise ModelError(f"{where}: extends {data['extends']!r}: more than {MAX_DEPTH} configurations extend one "
                          "another; merge some of them")
-    base_data, base_lines = _read(base, (*chain, path))
+    try:
+        base_data, base_lines = _read(base, (*chain, path))
+    except OSError as exc:  # unreadable (permissions, an I/O error): at the line that names it
+        raise ModelError(f"{where}: extends {data['extends']!r}: {base}: cannot be read "
+                         f"({exc.strerror or exc})") from None
     own = {k: v for k, v in data.items() if k != "extends"}
     merged_lines = {k: v for k, v in base_lines.items() if not _replaced(k, own)}
     merged_lines.update(lines)
     return _merge(base_data, own), merged_lines
 
 
+def builtin_configurations() -> list[str]:
+    """The names ``extends`` takes for the configurations shipped in ``modelgen/data`` (``replay_*.yaml``)."""
+    return sorted(p.stem for p in data_path().glob("replay_*.yaml") if p.is_file())
+
+
 def _base_path(value: Any, path: Path, where: str) -> Path:
-    """The file ``extends`` names: relative to the naming file's folder, or a built-in configuration's name."""
+    """The file ``extends`` names: relative to the naming file's folder, or a built-in configuration's name.
+
+    Anything else is refused at ``where`` (the ``extends`` line), saying what the name is: missing, a folder, a
+    device or pipe, a symbolic link that leads nowhere (a loop or a missing target), a name the system refuses."""
     if not isinstance(value, str) or not value.strip():
         raise ModelError(f"{where}: extends must name a configuration file, got {value!r}")
+    if "\0" in value:
+        raise ModelError(f"{where}: extends {value!r}: a file name cannot hold a NUL character")
     candidate = Path(value) if Path(value).is_absolute() else path.parent / value
-    if candidate.is_file():
-        return candidate
-    if "/" not in value and "\\" not in value:
-        builtin = data_path(value if value.endswith((".yaml", ".yml")) else f"{value}.yaml")
-        if builtin.is_file():
-            return builtin
-    raise ModelError(f"{where}: extends {value!r}: no such configuration file ({candidate}) and no built-in "
-                     "configuration of that name")
+    try:
+        if candidate.is_file():
+            return candidate
+        problem = _not_a_file(candidate)
+    except OSError as exc:  # a name too long for the system, ...
+        raise ModelError(f"{where}: extends {_short(value)}: not a usable file name ({exc.strerror or exc})") from None
+    if problem:
+        raise ModelError(f"{where}: extends {_short(value)}: {candidate} is {problem}, not a configuration file")
+    names = builtin_configurations()
+    stem = value[:-5] if value.endswith(".yaml") else value[:-4] if value.endswith(".yml") else value
+    if "/" not in value and "\\" not in value and stem in names:
+        return data_path(f"{stem}.yaml")
+    close = difflib.get_close_matches(stem, names, n=1)
+    raise ModelError(f"{where}: extends {_short(value)}: no such configuration file ({_short(str(candidate))}) and no "
+                     f"built-in configuration of that name (built in: {', '.join(names)})"
+                     + (f"; did you mean {close[0]!r}?" if close else ""))
+
+
+def _not_a_file(candidate: Path) -> str:
+    """What ``candidate`` is when it exists but is no regular file (or is a link to nothing); '' if it is absent."""
+    if candidate.is_symlink() and not candidate.exists():
+        try:
+            candidate.resolve(strict=True)
+        except RuntimeError:  # Python < 3.13 reports a loop so
+            return "a symbolic link in a loop"
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                return "a symbolic link in a loop"
+            return "a symbolic link to a file that does not exist"
+        return "a symbolic link to a file that does not exist"
+    if candidate.is_dir():
+        return "a folder"
+    if candidate.exists():
+        return "not a regular file (a device, a pipe or a socket)"
+    return ""
+
+
+def _short(text: str, limit: int = 120) -> str:
+    """``text`` quoted, its middle cut out when it is longer than ``limit`` (a refused 5000-character name)."""
+    return repr(text) if len(text) <= limit else repr(f"{text[:limit // 2]}...{text[-limit // 2:]}")
 
 
 def _merge(base: Any, own: Any) -> Any:

@@ -116,6 +116,43 @@ def test_a_chain_deeper_than_the_limit_is_refused(tmp_path):
     with pytest.raises(ModelError, match=rf"more than {MAX_DEPTH} configurations extend one another"):
         load_config(tmp_path / "c0.yaml")
     assert load_config(tmp_path / "c2.yaml").name == "replay_drive_0708"  # a chain within the limit is read
+    # c1 has exactly MAX_DEPTH bases (c2 .. c8 and the built-in one): "at most 8 deep" is read (it was refused)
+    assert load_config(tmp_path / "c1.yaml").name == "replay_drive_0708"
+
+
+@pytest.mark.parametrize("case, lay_out, problem", [
+    ("symlink loop", lambda d: ((d / "a.yaml").symlink_to("b.yaml"), (d / "b.yaml").symlink_to("a.yaml")),
+     r"a\.yaml is a symbolic link in a loop, not a configuration file"),
+    ("symlink to itself", lambda d: (d / "a.yaml").symlink_to("a.yaml"), r"a symbolic link in a loop"),
+    ("dangling symlink", lambda d: (d / "a.yaml").symlink_to("gone.yaml"),
+     r"a symbolic link to a file that does not exist"),
+    ("pipe", lambda d: __import__("os").mkfifo(d / "a.yaml"), r"not a regular file \(a device, a pipe or a socket\)"),
+    ("folder", lambda d: (d / "a.yaml").mkdir(), r"a\.yaml is a folder, not a configuration file"),
+])
+def test_a_base_that_is_no_regular_file_is_refused_at_the_extends_line_saying_what_it_is(tmp_path, case, lay_out,
+                                                                                       problem):
+    """They were all 'no such configuration file'; a pipe would have blocked the read had it got that far."""
+    lay_out(tmp_path)
+    child = tmp_path / "nav.yaml"
+    child.write_text("navigator: mine\nextends: a.yaml\n")
+    with pytest.raises(ModelError, match=rf"^{re.escape(str(child))}:2: extends 'a\.yaml': .*{problem}"):
+        load_config(child)
+
+
+def test_a_symlink_to_a_base_is_read_and_one_back_to_the_child_is_a_cycle(tmp_path):
+    from modelgen.navigator.config_bases import read_config_with_bases
+
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "elsewhere" / "real.yaml").write_text("navigator: base\nmodel: m\n")
+    (tmp_path / "base.yaml").symlink_to(tmp_path / "elsewhere" / "real.yaml")
+    child = tmp_path / "nav.yaml"
+    child.write_text("navigator: mine\nextends: base.yaml\n")
+    assert read_config_with_bases(child)[0] == {"navigator": "mine", "model": "m"}
+    child.write_text("navigator: mine\nextends: link.yaml\n")
+    (tmp_path / "link.yaml").symlink_to("nav.yaml")
+    with pytest.raises(ModelError, match=rf"^{re.escape(str(child))}:2: extends 'link\.yaml': the configurations "
+                                         r"extend each other in a cycle \(nav\.yaml -> link\.yaml\)"):
+        load_config(child)
 
 
 @pytest.mark.corpus
