@@ -470,8 +470,18 @@ def _gnss_rows(derived, blocks: dict[str, Block], where: str) -> tuple[GnssRow, 
                 found = GnssRow(kind, hits[0][1], hits[0][2])
                 break
         if found is None:
+            several = {kind: [model.state_names[i] for i in blocks[kind].indices if i in depends]
+                       for kind in ("velocity", "position")}
+            several = {kind: states for kind, states in several.items() if len(states) > 1}
+            detail = ""
+            if several:
+                kind, states = next(iter(several.items()))
+                detail = (f"; it depends on {len(states)} {kind} error states ({', '.join(states)})"
+                          + ("; a GNSS lever arm's exact O(l/R) terms do that: declare approximations: "
+                             "[lever_arm_at_computed_position] in the navigation: section"
+                             if kind == "position" else ""))
             raise ModelError(f"{model.measurements[r].place() or where}: measurement {name!r} is neither a position nor a velocity difference "
-                             "along one axis: the navigator's GNSS update cannot fill it")
+                             f"along one axis: the navigator's GNSS update cannot fill it{detail}")
         rows.append(found)
     return tuple(rows)
 
@@ -527,6 +537,7 @@ def spec_of(derived, model_file: Path, with_python: bool = True) -> NavigatorSpe
     defaults = {k: float(v) for k, v in model.parameter_defaults().items()}
     expressions = {p: QUANTITIES[p] for p in parameter_names if p in QUANTITIES and p not in defaults}
     free = tuple(p for p in parameter_names if p not in expressions)
+    _check_imu_noises(model, expressions, model_file)
     rates = _rates(model, model_file)
     if frame == "ECEF":
         _check_ecef(model_file, blocks, rows)
@@ -540,6 +551,45 @@ def spec_of(derived, model_file: Path, with_python: bool = True) -> NavigatorSpe
         spec.module = _python_module(derived)
         spec.rates = model_rates(spec.rates_python, model.name)
     return spec
+
+
+#: The IMU white noises of a navigation: section and the parameter through which the navigator sets each from the
+#: configuration (QUANTITIES): (sensor attribute of the navigation problem, its key under navigation.noises, the
+#: parameter, its unit, the configuration's key).
+_IMU_NOISES = (("gyro", "gyro", "gyro_angle_random_walk", "rad/sqrt(s)", "noise.gyro_white"),
+               ("accelerometer", "accel", "accel_velocity_random_walk", "m/s/sqrt(s)", "noise.accel_white"))
+
+
+def _check_imu_noises(model, expressions: dict[str, str], model_file: Path) -> None:
+    """Refuse a navigation: section whose IMU white noise the configuration's ``noise`` cannot reach.
+
+    The navigator sets the gyro and accelerometer white noises at every step through the parameters named
+    ``gyro_angle_random_walk`` and ``accel_velocity_random_walk`` (declared without a value). A PSD written with
+    another parameter, or with one of these that has a default, kept the model file's value silently while the
+    summary reported the configuration's ``noise.gyro_white`` as the value used."""
+    problem = getattr(model, "navigation", None)
+    if problem is None:
+        return  # a model written as equations names its noises itself (ins_gps15_nav)
+    symbols = {p.name: p.symbol for p in model.parameters}
+    psd_of = {n.symbol: (n.name, model.noise_psd.get(n.name)) for n in model.noises}
+    for attribute, key, parameter, unit, config_key in _IMU_NOISES:
+        sensor = getattr(problem, attribute, None)
+        noise = getattr(sensor, "noise", None)
+        if noise is None:
+            continue
+        wanted = symbols.get(parameter) if parameter in expressions else None
+        for symbol in noise:
+            name, psd = psd_of.get(str(symbol), (str(symbol), None))
+            used = {str(s) for s in getattr(psd, "free_symbols", ())}
+            if wanted is not None and wanted in used:
+                continue
+            why = (f"its parameter {parameter} has a default value, which the navigator then leaves as it is"
+                   if parameter in symbols and parameter not in expressions else
+                   f"its PSD {psd} does not use the parameter {parameter}")
+            raise ModelError(f"{_line_of(model_file, (f'navigation.noises.{key}', 'navigation.noises', 'navigation'))}: "
+                             f"white noise {name}: {why}; the navigator sets this noise from the configuration's "
+                             f"{config_key} only through a parameter {parameter} [{unit}] declared without a value "
+                             f"(the filter would keep the model file's noise while the summary reports {config_key})")
 
 
 def _rates(model, model_file: Path):
