@@ -190,9 +190,10 @@ class _Reader:
         self.path, self.data, self.lines = path, data, lines
 
     def where(self, key: str) -> str:
-        """'file:line' of a key path, or of the closest enclosing key that has a line."""
+        """'file:line' of a key path, or of the closest enclosing key that has a line, else the file's first line
+        (a top-level key that neither the file nor any base gives)."""
         probe = closest_key(self.lines, key)
-        return self.lines[probe] if probe else str(self.path)
+        return self.lines[probe] if probe else f"{self.path}:1"
 
     def get(self, key: str, default: Any = ...) -> Any:
         """The raw value at a key path; ModelError if missing and no default."""
