@@ -538,6 +538,7 @@ def spec_of(derived, model_file: Path, with_python: bool = True) -> NavigatorSpe
     expressions = {p: QUANTITIES[p] for p in parameter_names if p in QUANTITIES and p not in defaults}
     free = tuple(p for p in parameter_names if p not in expressions)
     _check_imu_noises(model, expressions, model_file)
+    _check_bias_driving_noises(derived, blocks, expressions, model_file)
     rates = _rates(model, model_file)
     if frame == "ECEF":
         _check_ecef(model_file, blocks, rows)
@@ -590,6 +591,40 @@ def _check_imu_noises(model, expressions: dict[str, str], model_file: Path) -> N
                              f"white noise {name}: {why}; the navigator sets this noise from the configuration's "
                              f"{config_key} only through a parameter {parameter} [{unit}] declared without a value "
                              f"(the filter would keep the model file's noise while the summary reports {config_key})")
+
+
+def _check_bias_driving_noises(derived, blocks: dict[str, Block], expressions: dict[str, str], model_file: Path) -> None:
+    """Refuse a random-walk gyro or accelerometer bias whose driving noise ``noise.gyro_bias_driving`` /
+    ``noise.accel_bias_driving`` cannot reach: its PSD must use ``gyro_bias_driving_noise`` /
+    ``accel_bias_driving_noise``, declared without a value (as :func:`_check_imu_noises`). A Gauss-Markov bias
+    (F_ii != 0) takes its rate and sigma from the model, and a random constant has no noise: neither is asked."""
+    model = derived.model
+    if getattr(model, "navigation", None) is None:
+        return
+    symbols = {p.name: p.symbol for p in model.parameters}
+    F, G = derived.F, derived.G
+    for kind, parameter, unit, config_key in (
+            ("gyro_bias", "gyro_bias_driving_noise", "rad/s/sqrt(s)", "noise.gyro_bias_driving"),
+            ("accel_bias", "accel_bias_driving_noise", "m/s^2/sqrt(s)", "noise.accel_bias_driving")):
+        wanted = symbols.get(parameter) if parameter in expressions else None
+        for i in (blocks[kind].indices if kind in blocks else ()):
+            if F[i, i] != 0:
+                continue
+            for k in range(G.shape[1]):
+                if G[i, k] == 0:
+                    continue
+                noise = model.noises[k]
+                psd = model.noise_psd.get(noise.name)
+                if wanted is not None and wanted in {str(x) for x in getattr(psd, "free_symbols", ())}:
+                    continue
+                why = (f"its parameter {parameter} has a default value, which the navigator then leaves as it is"
+                       if parameter in symbols and parameter not in expressions else
+                       f"its PSD {psd} does not use the parameter {parameter}")
+                at = noise.place("psd") or model.states[i].place() or _line_of(model_file, ("navigation.sensor_errors",))
+                raise ModelError(f"{at}: random-walk driving noise {noise.name} of {model.states[i].name}: {why}; "
+                                 f"the navigator sets it from the configuration's {config_key} only through a "
+                                 f"parameter {parameter} [{unit}] declared without a value (the filter would keep the "
+                                 f"model file's noise while the summary reports {config_key})")
 
 
 def _rates(model, model_file: Path):
