@@ -457,6 +457,10 @@ def _blocks(names: list[str], frame: str, where: str, places: Sequence[str] = ()
 def _gnss_rows(derived, blocks: dict[str, Block], where: str) -> tuple[GnssRow, ...]:
     model = derived.model
     H = derived.H  # the model's own symbolic H, tidied by the derivation (an entry that cancels is 0 there)
+    # rows written measured minus computed (difference: measured_minus_computed): z is GNSS minus INS for them
+    problem = getattr(model, "navigation", None)
+    flipped = {str(s) for m in (getattr(problem, "measurements", None) or ())
+               if getattr(m, "measured_minus_computed", False) for s in m.symbols}
     rows = []
     for r, name in enumerate(model.measurement_names):
         # is_identically_zero screens at two generic points before any symbolic proof: sympy's simplify of each of
@@ -467,7 +471,8 @@ def _gnss_rows(derived, blocks: dict[str, Block], where: str) -> tuple[GnssRow, 
             hits = [(i, a, s) for i, a, s in zip(blocks[kind].indices, blocks[kind].axes, blocks[kind].signs)
                     if i in depends]
             if len(hits) == 1:
-                found = GnssRow(kind, hits[0][1], hits[0][2])
+                sign = -hits[0][2] if model.measurements[r].symbol in flipped else hits[0][2]
+                found = GnssRow(kind, hits[0][1], sign)
                 break
         if found is None:
             several = {kind: [model.state_names[i] for i in blocks[kind].indices if i in depends]
