@@ -457,10 +457,6 @@ def _blocks(names: list[str], frame: str, where: str, places: Sequence[str] = ()
 def _gnss_rows(derived, blocks: dict[str, Block], where: str) -> tuple[GnssRow, ...]:
     model = derived.model
     H = derived.H  # the model's own symbolic H, tidied by the derivation (an entry that cancels is 0 there)
-    # rows written measured minus computed (difference: measured_minus_computed): z is GNSS minus INS for them
-    problem = getattr(model, "navigation", None)
-    flipped = {str(s) for m in (getattr(problem, "measurements", None) or ())
-               if getattr(m, "measured_minus_computed", False) for s in m.symbols}
     rows = []
     for r, name in enumerate(model.measurement_names):
         # is_identically_zero screens at two generic points before any symbolic proof: sympy's simplify of each of
@@ -471,8 +467,9 @@ def _gnss_rows(derived, blocks: dict[str, Block], where: str) -> tuple[GnssRow, 
             hits = [(i, a, s) for i, a, s in zip(blocks[kind].indices, blocks[kind].axes, blocks[kind].signs)
                     if i in depends]
             if len(hits) == 1:
-                sign = -hits[0][2] if model.measurements[r].symbol in flipped else hits[0][2]
-                found = GnssRow(kind, hits[0][1], sign)
+                # z along the row is the block's sign times H's: a row written measured minus computed, or along
+                # an axis of the other sense (up in an NED model), has H = -1 and takes GNSS minus INS
+                found = GnssRow(kind, hits[0][1], hits[0][2] * _sign_at_rest(model, H[r, hits[0][0]]))
                 break
         if found is None:
             several = {kind: [model.state_names[i] for i in blocks[kind].indices if i in depends]
@@ -489,6 +486,31 @@ def _gnss_rows(derived, blocks: dict[str, Block], where: str) -> tuple[GnssRow, 
                              f"along one axis: the navigator's GNSS update cannot fill it{detail}")
         rows.append(found)
     return tuple(rows)
+
+
+#: Parameter values of a vehicle at rest, level, north, at 40 deg N (lever arms, rates, forces 0 but gravity), for
+#: the sign of an H entry whose terms beyond the leading one are lever-arm and rate terms.
+_AT_REST = {"latitude": 0.7, "height": 100.0, "meridian_radius": 6.36e6, "prime_vertical_radius": 6.39e6,
+            "earth_radius": 6.37e6, "geocentric_radius": 6.37e6, "gravity": 9.8, "earth_rate": 7.29e-5,
+            "c11": 1.0, "c22": 1.0, "c33": 1.0, "body_specific_force_z": -9.8, "specific_force_down": -9.8}
+
+
+def _sign_at_rest(model, entry) -> float:
+    """+1 or -1: the sign of the GNSS row's H entry on its state, at rest (:data:`_AT_REST`; any other symbol 0,
+    a model default where there is one), where it is its leading term (1, -1, or a geodetic position's metres)."""
+    import sympy as sp
+
+    by_symbol = {p.symbol: p for p in model.parameters}
+    point = {}
+    for symbol in entry.free_symbols:
+        p = by_symbol.get(str(symbol))
+        name = p.name if p is not None else str(symbol)
+        value = _AT_REST.get(name, p.value if p is not None and p.value is not None and name not in QUANTITIES else 0.0)
+        point[symbol] = sp.Float(float(value))
+    value = float(sp.sympify(entry).xreplace(point).evalf())
+    if not math.isfinite(value) or value == 0.0:
+        return 1.0  # no sign to read at rest: the block's own, as before
+    return 1.0 if value > 0 else -1.0
 
 
 def _carried(derived, blocks: dict[str, Block], where: str) -> tuple[int, ...]:

@@ -54,6 +54,17 @@ def test_a_measured_minus_computed_gnss_row_gets_gnss_minus_ins(tmp_path):
     assert sum_of_rows == sp.zeros(3, plain.n_states)  # H flipped too: z - H x is the same update
 
 
+def test_a_gnss_position_row_along_up_in_an_ned_model_gets_the_up_difference(tmp_path):
+    """axes: [north, east, up] (documented) makes the third row -position_error_down; the navigator took the block's
+    sign alone and filled it with the down difference, so the height updates pushed the wrong way (2.0 m RMS outside
+    outages on the test excerpt against 0.050 m with the rows along down)."""
+    spec = _spec(tmp_path, MODEL.replace("DIFFERENCE", ", axes: [north, east, up]"))
+    assert [(r.kind, r.axis, r.sign) for r in spec.gnss_rows[:3]] == [("position", 0, 1.0), ("position", 1, 1.0),
+                                                                      ("position", 2, -1.0)]
+    z = spec.gnss_z(np.zeros(3), np.array([1.0, 2.0, 3.0]), np.ones(6))[0]
+    assert z[2] == -3.0  # up = -down, as H says
+
+
 @pytest.mark.parametrize("parameter, problem", [
     ("{name: gyro_noise, symbol: N_g, unit: rad/sqrt(s), value: 3.5e-5}", "does not use the parameter gyro_angle_random_walk"),
     ("{name: gyro_angle_random_walk, symbol: N_g, unit: rad/sqrt(s), value: 3.5e-5}", "has a default value"),
