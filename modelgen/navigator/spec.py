@@ -484,8 +484,32 @@ def _gnss_rows(derived, blocks: dict[str, Block], where: str) -> tuple[GnssRow, 
                              if kind == "position" else ""))
             raise ModelError(f"{model.measurements[r].place() or where}: measurement {name!r} is neither a position nor a velocity difference "
                              f"along one axis: the navigator's GNSS update cannot fill it{detail}")
+        _check_row_unit(model.measurements[r], found, where)
         rows.append(found)
     return tuple(rows)
+
+
+def _check_row_unit(measurement, row: GnssRow, where: str) -> None:
+    """Refuse a GNSS row in another unit than the navigator's differences: metres, metres per second (SI, factor 1).
+
+    The navigator fills every row with INS minus GNSS in metres (m/s) and R with the receiver's sigmas in metres:
+    a geodetic position measurement (``form: geodetic``, latitude and longitude in rad) was filled so, silently,
+    a metre taken for a radian."""
+    from modelgen.model.units import parse_unit
+
+    unit = getattr(measurement, "unit", None)
+    if not unit:
+        return  # undeclared: not checked (a model without units)
+    wanted = "m" if row.kind == "position" else "m/s"
+    try:
+        parsed, target = parse_unit(unit), parse_unit(wanted)
+    except ModelError:
+        return  # the loader has checked the unit
+    if parsed.dimension != target.dimension or not math.isclose(parsed.factor, 1.0, rel_tol=1e-12):
+        raise ModelError(f"{measurement.place() or where}: measurement {measurement.name!r} is in {unit}: the "
+                         f"navigator's GNSS update fills {row.kind} rows with INS minus GNSS in {wanted} (R from the "
+                         f"receiver's sigmas in {wanted}); write it in {wanted}"
+                         + (" (form: metres)" if row.kind == "position" else ""))
 
 
 #: Parameter values of a vehicle at rest, level, north, at 40 deg N (lever arms, rates, forces 0 but gravity), for

@@ -74,3 +74,13 @@ def test_a_gyro_white_noise_the_configuration_cannot_reach_is_refused_at_its_noi
                                                    parameter)
     with pytest.raises(ModelError, match=rf"m\.yaml:13: white noise gyro_white_noise_x: .*{problem}.*noise\.gyro_white"):
         _spec(tmp_path, text)
+
+
+def test_a_geodetic_gnss_position_measurement_is_refused_at_its_line(tmp_path):
+    """form: geodetic (latitude and longitude in rad, documented) was filled with INS minus GNSS in metres and R in
+    square metres: a metre taken for a radian, silently."""
+    text = MODEL.replace('{of: position, form: metres, symbols: [z_n, z_e, z_d], variance: "sigma_r**2"DIFFERENCE}',
+                         '{of: position, form: geodetic, symbols: [z_L, z_l, z_h], variance: "1.0e-12"}')
+    with pytest.raises(ModelError, match=r"m\.yaml:15: measurement 'position_difference_z_L' is in rad: the navigator's "
+                                         r"GNSS update fills position rows with INS minus GNSS in m .*form: metres"):
+        _spec(tmp_path, text)
