@@ -107,7 +107,10 @@ The method and the decision, written before any outage was flown with its result
    weighs by the about n / f independent innovations it holds (the premise of R x f) instead of by its
    update count.  The white log-likelihood is printed beside it, and the offset-0 value and the standard
    error of the difference (the kept terms taken as independent) are stated, not used.  Whatever it picks is
-   shipped, whatever the outage schedules then show.
+   shipped, whatever the outage schedules then show.  On the built-in drive (stage 8,
+   bench/results/navigator_tuning_stage8_selector.txt) it picks the white start's point for both models:
+   15 states 2421.5 against 2405.0 (the white log-likelihood picked the same), 21 states 2791.4 against
+   2756.7 (the white log-likelihood picked the first start's point, which that configuration held until then).
 
 Stage 8 (``--select [STAGE7_JSON ...] [--json FILE]``): step 5's selection on stage 7's committed fixed points
 (default: bench/results/navigator_tuning_stage7_both_starts_{15,15_white,21,21_white}.json), without running the
