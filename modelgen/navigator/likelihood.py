@@ -42,7 +42,8 @@ import numpy as np
 from scipy.optimize import minimize
 
 from modelgen.navigator.config import NavigatorConfig
-from modelgen.navigator.tuning import CONFIG_FIELDS, Innovations, record_innovations, row_statistics, update_period
+from modelgen.navigator.tuning import (CONFIG_FIELDS, Innovations, record_innovations, row_statistics,
+                                       update_steps)
 
 #: the parameters the search can estimate: configuration key -> what setting it changes.  The two white noises
 #: share one factor (one vibration environment: the data cannot tell the two apart, stage 1 of
@@ -185,21 +186,6 @@ def maximum_likelihood(config: NavigatorConfig, innovations: Callable[[Navigator
                     str(result.message))
 
 
-def update_steps(time: np.ndarray) -> np.ndarray:
-    """Each update's step number: 0 at the first, then each gap to the one before in update periods T (the
-    sensor's median spacing), rounded, at least 1.
-
-    Counted gap by gap, not as (t - t_0) / T: a receiver's epochs drift against any fixed grid over a drive
-    (the built-in drive's 4-Hz epochs are 0.11 s off t_0 + n T after 9 minutes) and the NHC's covariance
-    steps are sometimes half a period apart; a gap where a sensor did not update counts its missed periods."""
-    time = np.asarray(time, float)
-    if len(time) < 2:
-        return np.zeros(len(time), dtype=np.int64)
-    period = update_period(time)
-    gaps = np.maximum(1, np.round(np.diff(time) / period).astype(np.int64))
-    return np.concatenate([[0], np.cumsum(gaps)])
-
-
 @dataclass(frozen=True)
 class ThinnedRow:
     """One measurement row's share of the thinned composite log-likelihood (:func:`thinned_log_likelihood`)."""
@@ -241,7 +227,8 @@ def thinned_log_likelihood(candidates: dict[str, dict[str, Innovations]],
       k for every candidate (``steps`` gives k per (sensor, row) instead, for tests);
     * the common epochs: the update times every candidate has for that sensor (the NHC and the ZUPT are used
       only while conditions on the navigator's own state hold, so two flights need not update at the same
-      steps), each numbered by its update step n (:func:`update_steps`: the gaps counted in update periods);
+      steps), each numbered by its update step n (:func:`modelgen.navigator.tuning.update_steps`: the gaps
+      counted in update periods, the numbering stage 4's autocorrelation uses too);
     * at each, candidate c's Gaussian log density of the row, l = -1/2 (log 2 pi S_ii + nu_i^2 / S_ii), with
       its own innovation and its own innovation covariance;
     * offset j = 0 .. k-1 keeps the epochs whose step n is j mod k (two kept epochs at least k steps

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
 
-from modelgen.navigator import likelihood
+from modelgen.navigator import likelihood, tuning
 from modelgen.navigator.config import builtin_config_path, load_config
 from modelgen.navigator.tuning import Innovations
 
@@ -164,7 +164,7 @@ def test_the_thinned_score_is_each_rows_gaussian_density_summed_over_the_epochs_
 def test_every_candidate_is_scored_on_the_identical_epochs():
     """A candidate's updates where another has none are not scored for anyone: the epochs are those every
     candidate has, so changing a candidate's innovations there changes no score; the epochs are numbered by
-    their gaps in update periods (:func:`likelihood.update_steps`), so drifting time tags are all kept."""
+    their gaps in update periods (:func:`tuning.update_steps`), so drifting time tags are all kept."""
     rng = np.random.default_rng(8)
     time = 0.1 * np.arange(400)
     nu = rng.standard_normal(400)
@@ -185,14 +185,14 @@ def test_every_candidate_is_scored_on_the_identical_epochs():
     # epochs that drift against a fixed grid (a receiver's clock) and half-period steps are all scored
     drift = 0.25007 * np.arange(2000) + 0.001 * rng.standard_normal(2000)
     drift[1000:] += 0.05  # one gap a fifth of a period long: still one update step
-    steps_of = likelihood.update_steps(drift)
+    steps_of = tuning.update_steps(drift)
     assert steps_of[0] == 0 and np.all(np.diff(steps_of) == 1)
     a, b = _rows("gnss", drift, rng.standard_normal(2000), 1.0), _rows("gnss", drift, rng.standard_normal(2000), 2.0)
     drifting = likelihood.thinned_log_likelihood({"a": {"gnss": a}, "b": {"gnss": b}}, steps={("gnss", 0): 5})
     assert drifting.rows[0].epochs == 2000 and drifting.rows[0].kept_first_offset == 400
-    assert list(likelihood.update_steps(np.array([0.0, 0.1, 0.15, 0.25, 0.35]))) == [0, 1, 2, 3, 4]  # half a step
+    assert list(tuning.update_steps(np.array([0.0, 0.1, 0.15, 0.25, 0.35]))) == [0, 1, 2, 3, 4]  # half a step
     # a gap counts its missed periods: b's three missing NHC steps (17, 18, 250) keep the numbering of a
-    assert list(likelihood.update_steps(time[keep])) == list(np.arange(400)[keep])
+    assert list(tuning.update_steps(time[keep])) == list(np.arange(400)[keep])
 
 
 def test_the_step_is_the_ceiling_of_the_largest_correlation_factor_over_the_candidates():

@@ -46,6 +46,27 @@ def test_pairs_are_not_formed_across_a_pause_in_the_updates():
     assert np.allclose(rho[np.isfinite(rho)], 1.0)
 
 
+def test_time_tags_drifting_against_a_fixed_grid_keep_every_pair_and_a_gap_still_breaks_pairs():
+    """The updates are numbered by their gaps counted in periods (tuning.update_steps), not put on the grid
+    t_0 + n T: time tags that drift by 0.3 T over the series keep every pair at lag 1 (the grid dropped the
+    samples a quarter period off it), and a real gap still leaves out the pairs across it."""
+    period = 0.25
+    n = 400
+    time = period * np.arange(n) * (1.0 + 0.3 / (n - 1))  # the last tag 0.3 T after t_0 + (n - 1) T
+    x = _ar1(0.5, n)
+    lag1 = next(b for k, a, b in tuning.lagged_pairs(time, x, period, max_lag_s=1.0) if k == 1)
+    assert len(lag1) == n - 1
+    assert list(tuning.update_steps(time, period)) == list(range(n))
+    gap = np.r_[time[:200], time[200:] + 3 * period]  # three updates missed after the 200th
+    assert list(tuning.update_steps(gap, period)) == list(range(200)) + list(range(203, n + 3))
+    pairs = {k: len(a) for k, a, b in tuning.lagged_pairs(gap, x, period, max_lag_s=1.0)}
+    assert pairs[1] == n - 2  # not the pair across the gap (the updates there are 4 T apart) ...
+    assert pairs[4] == (200 - 4) + (n - 200 - 4) + 1  # ... which is a pair at lag 4 (steps 199 and 203)
+    e = np.r_[np.ones(200), -np.ones(n - 200)]  # +1 then -1: a pair across the gap would lower rho below 1
+    rho = tuning.autocorrelation(gap, e, period, max_lag_s=1.0)
+    assert np.allclose(rho[1:4], 1.0) and rho[4] < 1.0
+
+
 @pytest.fixture(scope="module")
 def excerpt():
     from modelgen.navigator.config import load_config
