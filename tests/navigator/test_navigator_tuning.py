@@ -134,8 +134,8 @@ CONFIG_FIELDS = {"gnss.position_variance_factor": "gnss_position_variance_factor
 
 
 @pytest.mark.parametrize("config_name, result_name", [
-    ("replay_drive_0708.yaml", "navigator_tuning_stage7_both_starts_15_white.json"),
-    ("replay_drive_0708_21.yaml", "navigator_tuning_stage7_both_starts_21_white.json")])
+    ("replay_drive_0708.yaml", "navigator_tuning_stage9_fixed_point_15_white.json"),
+    ("replay_drive_0708_21.yaml", "navigator_tuning_stage9_fixed_point_21_white.json")])
 def test_the_shipped_configurations_hold_the_fixed_point_of_stages_4_and_5(config_name, result_name):
     """Every number stages 4 and 5 set, iterated to their fixed point (bench/navigator_tuning.py --fixed-point
     --json, its result committed in bench/results), is held in the shipped configuration to the 3 figures written
@@ -174,25 +174,37 @@ def test_a_tuning_statement_with_a_bar_and_a_newline_stays_one_table_row_of_the_
     assert not _tuning_lines(dataclasses.replace(config, tuning={}))
 
 
+def test_the_summary_states_the_pooled_nees_it_flew_not_a_figure_of_another_configuration():
+    """The overconfidence note of summary.md is computed from the flight's own schedules (report.py): the pooled
+    mean NEES and the fraction inside the 95 % region; nothing when no schedule was flown."""
+    from modelgen.navigator.report import _overconfidence_lines
+
+    summary = {"schedules": [{}], "consistency_pooled": {"count": 51, "nees_mean": 2.4712, "inside_95_fraction": 0.86}}
+    (text, _) = _overconfidence_lines(summary)
+    assert "51 outage ends" in text and "mean 2.47 against 2" in text and "86 % inside" in text
+    assert "halves" not in text and "replay_drive_0708_21" not in text
+    assert _overconfidence_lines({"schedules": [], "consistency_pooled": {}}) == []
+
+
 @pytest.mark.parametrize("states, config_name", [(15, "replay_drive_0708.yaml"), (21, "replay_drive_0708_21.yaml")])
 def test_of_the_fixed_points_from_both_starts_the_shipped_one_has_the_higher_thinned_log_likelihood(states, config_name):
-    """Stage 7's step 5 (bench/navigator_tuning.py --fixed-point --both-starts; stage 8, --select, on the committed
-    fixed points): the fixed point is not unique, and of the converged ones, from the shipped and from the white
-    start, the configuration holds the one whose innovations' thinned composite log-likelihood with GNSS present
-    is higher (likelihood.thinned_log_likelihood: a choice the innovations make, not the outages).  Stage 8
-    scored exactly stage 7's points, and its flights reproduce stage 7's white log-likelihoods (stated beside,
-    not used: for 21 states they pick the other point)."""
+    """Stage 7's step 5 (bench/navigator_tuning.py --fixed-point --both-starts, run again as stage 9 after stage 4
+    was made to pair every update; --select on the committed fixed points): of the converged fixed points, from
+    the shipped and from the white start, the configuration holds the one whose innovations' thinned composite
+    log-likelihood with GNSS present is higher (likelihood.thinned_log_likelihood: a choice the innovations make,
+    not the outages).  The selection scored exactly stage 9's points, and its flights reproduce their white
+    log-likelihoods (stated beside, not used)."""
     import json
 
     from modelgen.navigator import likelihood
     from modelgen.navigator.config import builtin_config_path, load_config
 
-    runs = [json.loads((STAGE4_RESULTS / f"navigator_tuning_stage7_both_starts_{states}{suffix}.json").read_text())
+    runs = [json.loads((STAGE4_RESULTS / f"navigator_tuning_stage9_fixed_point_{states}{suffix}.json").read_text())
             for suffix in ("", "_white")]
     assert [r["start"] for r in runs] == ["shipped", "white"] and all(r["converged"] for r in runs)
     assert all(r["configuration"] == config_name for r in runs)
-    stage8 = json.loads((STAGE4_RESULTS / "navigator_tuning_stage8_selector.json").read_text())
-    (selection,) = [s for s in stage8["selections"] if s["configuration"] == config_name]
+    stage9 = json.loads((STAGE4_RESULTS / "navigator_tuning_stage9_selector.json").read_text())
+    (selection,) = [s for s in stage9["selections"] if s["configuration"] == config_name]
     assert selection["points"] == {r["start"]: r["fixed_point"] for r in runs}
     for r in runs:
         assert selection["white_log_likelihood"][r["start"]]["total"] == pytest.approx(r["log_likelihood"]["total"],
