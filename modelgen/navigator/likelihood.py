@@ -19,6 +19,11 @@ Stage 5 of ``bench/navigator_tuning.py`` estimates the IMU white noises' factor
 and the bias driving noises at the data sheet's (see :data:`PROCESS_NOISE` for
 why not all of them).
 
+Stage 7 picks between its fixed points (it has more than one) by
+:func:`thinned_log_likelihood`, a composite likelihood that keeps about one
+innovation per integrated autocorrelation time of each row, so that each sensor
+weighs by the information its updates hold and not by how often it updates.
+
 The flight is the configuration's log with GNSS present everywhere (no outage
 flown, no outage error computed: nothing here can see the figures an outage
 schedule is judged by).  Every update tried counts, before any gate.  The
@@ -37,7 +42,8 @@ import numpy as np
 from scipy.optimize import minimize
 
 from modelgen.navigator.config import NavigatorConfig
-from modelgen.navigator.tuning import CONFIG_FIELDS, Innovations, record_innovations
+from modelgen.navigator.tuning import (CONFIG_FIELDS, Innovations, record_innovations, row_statistics,
+                                       update_steps)
 
 #: the parameters the search can estimate: configuration key -> what setting it changes.  The two white noises
 #: share one factor (one vibration environment: the data cannot tell the two apart, stage 1 of
@@ -178,3 +184,131 @@ def maximum_likelihood(config: NavigatorConfig, innovations: Callable[[Navigator
                  if f"{MODEL_PARAMETER}{k}" not in keys})
     return Estimate(start, after, held, flown(x0), flown(result.x), len(cache), bool(result.success),
                     str(result.message))
+
+
+@dataclass(frozen=True)
+class ThinnedRow:
+    """One measurement row's share of the thinned composite log-likelihood (:func:`thinned_log_likelihood`)."""
+
+    source: str
+    row: int
+    step: int  # k: every k-th common epoch is kept (ceil of the largest f over the candidates)
+    factors: dict[str, float]  # each candidate's integrated autocorrelation f of the row (stage 4's statistic)
+    epochs: int  # the common epochs: every candidate has an update of this sensor there
+    score: dict[str, float]  # candidate -> mean over the k offsets of the kept epochs' log densities (= sum / k)
+    first_offset: dict[str, float]  # candidate -> the sum over the epochs at offset 0 (every k-th from the first)
+    kept_first_offset: int  # how many epochs offset 0 keeps
+    difference_variance: dict[str, float]  # "a - b" -> variance of one thinned draw of the difference (kept terms
+    # independent: epochs / k x the per-epoch variance of l_a - l_b)
+
+
+@dataclass(frozen=True)
+class ThinnedScore:
+    """The thinned composite log-likelihood of several candidates scored on the same epochs."""
+
+    rows: tuple[ThinnedRow, ...]
+    total: dict[str, float]  # candidate -> the statistic (sum over the rows of ThinnedRow.score)
+    by_source: dict[str, dict[str, float]]  # candidate -> sensor -> its rows' share
+    first_offset_total: dict[str, float]  # candidate -> sum over the rows of ThinnedRow.first_offset
+    difference_standard_error: dict[str, float]  # "a - b" -> sqrt of the rows' summed difference variances
+    left_out: tuple[str, ...]  # sensors not scored (absent from a candidate, or fewer than 20 updates in one)
+
+
+def thinned_log_likelihood(candidates: dict[str, dict[str, Innovations]],
+                           steps: dict[tuple[str, int], int] | None = None) -> ThinnedScore:
+    """A correlation-aware comparison of candidate filters flown on the same data: the composite Gaussian
+    log-likelihood of every row's innovations thinned to about one per integrated autocorrelation time.
+
+    What.  ``candidates``: name -> the innovations of one flight by sensor (:func:`tuning.record_innovations`),
+    every candidate flown on the same log.  For each row i of each sensor:
+
+    * f_c, the integrated autocorrelation of the row's standardized innovations in candidate c's flight
+      (:func:`modelgen.navigator.tuning.row_statistics`, stage 4's statistic), and k = ceil(max_c f_c), the same
+      k for every candidate (``steps`` gives k per (sensor, row) instead, for tests);
+    * the common epochs: the update times every candidate has for that sensor (the NHC and the ZUPT are used
+      only while conditions on the navigator's own state hold, so two flights need not update at the same
+      steps), each numbered by its update step n (:func:`modelgen.navigator.tuning.update_steps`: the gaps
+      counted in update periods, the numbering stage 4's autocorrelation uses too);
+    * at each, candidate c's Gaussian log density of the row, l = -1/2 (log 2 pi S_ii + nu_i^2 / S_ii), with
+      its own innovation and its own innovation covariance;
+    * offset j = 0 .. k-1 keeps the epochs whose step n is j mod k (two kept epochs at least k steps
+      apart), the same epochs for every candidate; the row's score is the mean over the k
+      offsets of the kept epochs' sum, which is the sum over every common epoch divided by k.
+
+    The statistic is the sum of the rows' scores (``total``); offset 0 alone (``first_offset_total``) and the
+    standard error of each pairwise difference of one thinned draw (kept terms taken as independent) are
+    stated beside it.
+
+    Why.  The white log-likelihood (:func:`log_likelihood`) sums every update as if independent, so a sensor
+    weighs by its update count: the NHC at 10 Hz, whose errors are correlated over many updates, outweighs
+    the GNSS rows, whose errors are correlated too but which update less often, by its number of updates
+    rather than by the information they hold.  n updates whose errors are correlated with integrated
+    autocorrelation f hold about n / f independent ones -- the premise of R x f (stage 4) and of the chance
+    threshold in :data:`PROCESS_NOISE`'s note.  Keeping one update per k >= f makes the kept terms about
+    independent, so each row enters with its effective number of innovations, and a composite likelihood of
+    about independent terms is what a sum of log densities is the likelihood of.  Each kept term is the log
+    score of the candidate's predicted density for that row -- a strictly proper scoring rule, largest in
+    expectation for the density that matches the data -- and every candidate is scored on the identical
+    epochs, so the comparison is paired on the same measurements.  k is the largest f of the candidates so
+    that the thinning is long enough for all of them (a candidate whose own innovations look white there does
+    not earn its row more weight).  The mean over the k offsets removes the arbitrary choice of the first
+    kept epoch (it is the expectation of the one-offset statistic over a uniformly drawn offset).  Marginal
+    rows, not the joint density of an update, because the rows of one sensor decorrelate at different rates.
+    What it does not change: each kept innovation is still the filter's one-update-ahead prediction from
+    every update before it, kept or not.
+    """
+    names = list(candidates)
+    if not names:
+        raise ValueError("thinned_log_likelihood: no candidates")
+    factors: dict[tuple[str, int], dict[str, float]] = {}
+    for name in names:
+        for st in row_statistics(candidates[name], {}):
+            factors.setdefault((st.source, st.row), {})[name] = st.factor
+    sensors = [s for s in candidates[names[0]] if all(s in candidates[c] for c in names)]
+    left_out = sorted({s for c in names for s in candidates[c]} - set(sensors))
+    pairs = [(a, b) for i, a in enumerate(names) for b in names[i + 1:]]
+    rows: list[ThinnedRow] = []
+    for source in sensors:
+        n_rows = len(candidates[names[0]][source].nu[0]) if candidates[names[0]][source].nu else 0
+        keys = [(source, i) for i in range(n_rows)]
+        if steps is None and not all(len(factors.get(key, {})) == len(names) for key in keys):
+            left_out.append(source)  # fewer than 20 updates in some candidate: no f there
+            continue
+        # the common epochs (microsecond keys), each candidate's index of them
+        index: dict[str, dict[int, int]] = {}
+        for name in names:
+            keys_us = np.round(np.asarray(candidates[name][source].time, float) * 1e6).astype(np.int64)
+            index[name] = {}
+            for i, key in enumerate(keys_us):
+                index[name].setdefault(int(key), i)  # the first update at a time, should there be two
+        common = sorted(set.intersection(*(set(index[name]) for name in names)))
+        if len(common) < 2:
+            left_out.append(source)
+            continue
+        time = np.array(common, float) * 1e-6
+        step = update_steps(time)
+        terms = {}
+        for name in names:
+            entry = candidates[name][source]
+            chosen = [index[name][key] for key in common]
+            nu = np.array([entry.nu[i] for i in chosen], float)
+            var = np.array([np.diag(entry.S[i]) for i in chosen], float)
+            terms[name] = -0.5 * (np.log(2.0 * math.pi * var) + nu**2 / var)  # (epochs, rows)
+        for i in range(n_rows):
+            key = (source, i)
+            k = int(steps[key]) if steps is not None else max(1, math.ceil(max(factors[key].values())))
+            offset = step % k
+            score = {name: float(np.sum(terms[name][:, i])) / k for name in names}
+            first = {name: float(np.sum(terms[name][offset == 0, i])) for name in names}
+            variance = {}
+            for a, b in pairs:
+                d = terms[a][:, i] - terms[b][:, i]
+                variance[f"{a} - {b}"] = float(np.var(d, ddof=1)) * len(d) / k if len(d) > 1 else 0.0
+            rows.append(ThinnedRow(source, i, k, dict(factors.get(key, {})), int(len(step)), score, first,
+                                   int(np.sum(offset == 0)), variance))
+    total = {name: float(sum(r.score[name] for r in rows)) for name in names}
+    by_source = {name: {s: float(sum(r.score[name] for r in rows if r.source == s))
+                        for s in dict.fromkeys(r.source for r in rows)} for name in names}
+    first_total = {name: float(sum(r.first_offset[name] for r in rows)) for name in names}
+    spread = {f"{a} - {b}": math.sqrt(sum(r.difference_variance[f"{a} - {b}"] for r in rows)) for a, b in pairs}
+    return ThinnedScore(tuple(rows), total, by_source, first_total, spread, tuple(left_out))

@@ -450,6 +450,19 @@ def _consistency_lines(summary: dict) -> list[str]:
     return lines + [""]
 
 
+def _overconfidence_lines(summary: dict) -> list[str]:
+    """What the pooled NEES of this flight's outage schedules says, computed from them (nothing stated for a
+    configuration this report did not fly)."""
+    p = summary.get("consistency_pooled") or {}
+    if not summary.get("schedules") or p.get("nees_mean") is None:
+        return []
+    inside = p.get("inside_95_fraction")
+    return ["When the mean NEES at the outage ends is far above 2 the filter is overconfident: its horizontal "
+            "covariance does not contain errors its model lacks or underrates. Here, pooled over the "
+            f"{p['count']} outage ends of every schedule: mean {_fmt(p['nees_mean'], 2)} against 2"
+            + (f", {_fmt(100 * inside, 0)} % inside the 95 % region" if inside is not None else "") + ".", ""]
+
+
 def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, float], latency: float) -> str:
     """summary.md: outage table, targets, tuning and how it was chosen, counts and notes."""
     lines = [f"# Replay: {config.name}", "",
@@ -501,12 +514,7 @@ def summary_markdown(summary: dict, config: NavigatorConfig, timings: dict[str, 
               f"{'on' if config.nhc_enabled else 'off'} (sigma {config.nhc_sigma_lateral} / "
               f"{config.nhc_sigma_vertical} m/s above {config.nhc_speed_min} m/s, below "
               f"{math.degrees(config.nhc_rate_max):.3g} deg/s of angular rate).", "",
-              "When the mean NEES at the outage ends is far above 2 the filter is overconfident: its horizontal "
-              "covariance does not contain errors its model lacks or underrates (on the built-in drive the "
-              "21-state model with gyro and accelerometer scale factors, replay_drive_0708_21.yaml, is about as "
-              "overconfident as the 15-state one: scale factors alone do not explain it; stage 4's R x f for "
-              "the aiding updates' time correlation about halves the pooled mean NEES there, so the updates' "
-              "correlation does not explain all of it either).", "",
+              *_overconfidence_lines(summary),
               "## Estimated biases (end of the drive, body axes)", "",
               f"gyro [deg/s]: {', '.join(f'{v:.4f}' for v in summary['final_gyro_bias_deg_s'])}; "
               f"accelerometer [mg]: {', '.join(f'{v:.2f}' for v in summary['final_accel_bias_mg'])}"

@@ -16,8 +16,11 @@ error) and turns it into the factor a navigation engineer inflates R by:
   S = H P H^T + R and R;
 * each row is standardized, e = nu_i / sqrt(S_ii), and its autocorrelation
   rho_k = sum(e_t e_{t+k}) / sum(e_t^2) is taken over the pairs exactly k
-  update periods apart (the NHC and the ZUPT are used only while their
-  conditions hold: pairs across a pause are not formed);
+  update steps apart (:func:`update_steps`: each gap between consecutive
+  updates counted in update periods, so time tags drifting against a fixed
+  grid keep every pair; the NHC and the ZUPT are used only while their
+  conditions hold: a pause counts its missed periods, so pairs across it are
+  not formed);
 * the correlation factor is the integrated autocorrelation
   f = 1 + 2 sum_{k=1}^{K-1} rho_k, summed while the pair sums
   rho_2m + rho_2m+1 stay positive (Geyer's initial positive sequence; at
@@ -109,22 +112,37 @@ def update_period(time: np.ndarray) -> float:
     return float(np.median(np.diff(time)))
 
 
-def lagged_pairs(time: np.ndarray, x: np.ndarray, period: float, max_lag_s: float = MAX_LAG_S):
-    """For k = 0 .. max lag: (k, x_t, x_{t+k}) over the samples of ``x`` exactly k update periods apart.
+def update_steps(time: np.ndarray, period: float | None = None) -> np.ndarray:
+    """Each update's step number: 0 at the first, then each gap to the one before in update periods T
+    (``period``, by default the sensor's median spacing, :func:`update_period`), rounded, at least 1.
 
-    The series is put on the grid time[0] + n T (a sample off the grid by a quarter period or more is left out), so
-    that a gap in the updates leaves out the pairs across it instead of pairing samples at other lags."""
+    Counted gap by gap, not as (t - t_0) / T: a receiver's epochs drift against any fixed grid over a drive
+    (the built-in drive's 4-Hz epochs are 0.11 s off t_0 + n T after 9 minutes) and the NHC's covariance
+    steps are sometimes half a period apart; a gap where a sensor did not update counts its missed periods.
+    The one numbering of updates that :func:`lagged_pairs` (stage 4's autocorrelation) and the thinned
+    composite log-likelihood (:func:`modelgen.navigator.likelihood.thinned_log_likelihood`) both use."""
     time = np.asarray(time, float)
+    if len(time) < 2:
+        return np.zeros(len(time), dtype=np.int64)
+    period = update_period(time) if period is None else float(period)
+    gaps = np.maximum(1, np.round(np.diff(time) / period).astype(np.int64))
+    return np.concatenate([[0], np.cumsum(gaps)])
+
+
+def lagged_pairs(time: np.ndarray, x: np.ndarray, period: float, max_lag_s: float = MAX_LAG_S):
+    """For k = 0 .. max lag: (k, x_t, x_{t+k}) over the samples of ``x`` exactly k update steps apart.
+
+    The samples are numbered by :func:`update_steps` (the gaps between consecutive updates counted in periods
+    T), so every sample is kept however far its time tag drifts from t_0 + n T, and a gap in the updates (its
+    missed periods counted) leaves out the pairs across it instead of pairing samples at other lags."""
     x = np.asarray(x, float)
-    steps = np.round((time - time[0]) / period).astype(np.int64)
-    on_grid = np.abs((time - time[0]) - steps * period) < 0.25 * period
-    steps, values = steps[on_grid], x[on_grid]
-    where = np.full(int(steps[-1]) + 1 if len(steps) else 0, -1, dtype=np.int64)  # grid step -> sample, or -1
+    steps = update_steps(time, period)
+    where = np.full(int(steps[-1]) + 1 if len(steps) else 0, -1, dtype=np.int64)  # step -> sample, or -1
     where[steps] = np.arange(len(steps))
     for k in range(int(round(max_lag_s / period)) + 1):
         partner = np.where(steps + k < len(where), where[np.minimum(steps + k, len(where) - 1)], -1)
         ok = partner >= 0
-        yield k, values[ok], values[partner[ok]]
+        yield k, x[ok], x[partner[ok]]
 
 
 def autocorrelation(time: np.ndarray, e: np.ndarray, period: float, max_lag_s: float = MAX_LAG_S) -> np.ndarray:

@@ -46,6 +46,27 @@ def test_pairs_are_not_formed_across_a_pause_in_the_updates():
     assert np.allclose(rho[np.isfinite(rho)], 1.0)
 
 
+def test_time_tags_drifting_against_a_fixed_grid_keep_every_pair_and_a_gap_still_breaks_pairs():
+    """The updates are numbered by their gaps counted in periods (tuning.update_steps), not put on the grid
+    t_0 + n T: time tags that drift by 0.3 T over the series keep every pair at lag 1 (the grid dropped the
+    samples a quarter period off it), and a real gap still leaves out the pairs across it."""
+    period = 0.25
+    n = 400
+    time = period * np.arange(n) * (1.0 + 0.3 / (n - 1))  # the last tag 0.3 T after t_0 + (n - 1) T
+    x = _ar1(0.5, n)
+    lag1 = next(b for k, a, b in tuning.lagged_pairs(time, x, period, max_lag_s=1.0) if k == 1)
+    assert len(lag1) == n - 1
+    assert list(tuning.update_steps(time, period)) == list(range(n))
+    gap = np.r_[time[:200], time[200:] + 3 * period]  # three updates missed after the 200th
+    assert list(tuning.update_steps(gap, period)) == list(range(200)) + list(range(203, n + 3))
+    pairs = {k: len(a) for k, a, b in tuning.lagged_pairs(gap, x, period, max_lag_s=1.0)}
+    assert pairs[1] == n - 2  # not the pair across the gap (the updates there are 4 T apart) ...
+    assert pairs[4] == (200 - 4) + (n - 200 - 4) + 1  # ... which is a pair at lag 4 (steps 199 and 203)
+    e = np.r_[np.ones(200), -np.ones(n - 200)]  # +1 then -1: a pair across the gap would lower rho below 1
+    rho = tuning.autocorrelation(gap, e, period, max_lag_s=1.0)
+    assert np.allclose(rho[1:4], 1.0) and rho[4] < 1.0
+
+
 @pytest.fixture(scope="module")
 def excerpt():
     from modelgen.navigator.config import load_config
@@ -113,8 +134,8 @@ CONFIG_FIELDS = {"gnss.position_variance_factor": "gnss_position_variance_factor
 
 
 @pytest.mark.parametrize("config_name, result_name", [
-    ("replay_drive_0708.yaml", "navigator_tuning_stage7_both_starts_15_white.json"),
-    ("replay_drive_0708_21.yaml", "navigator_tuning_stage7_21.json")])
+    ("replay_drive_0708.yaml", "navigator_tuning_stage9_fixed_point_15_white.json"),
+    ("replay_drive_0708_21.yaml", "navigator_tuning_stage9_fixed_point_21_white.json")])
 def test_the_shipped_configurations_hold_the_fixed_point_of_stages_4_and_5(config_name, result_name):
     """Every number stages 4 and 5 set, iterated to their fixed point (bench/navigator_tuning.py --fixed-point
     --json, its result committed in bench/results), is held in the shipped configuration to the 3 figures written
@@ -153,23 +174,47 @@ def test_a_tuning_statement_with_a_bar_and_a_newline_stays_one_table_row_of_the_
     assert not _tuning_lines(dataclasses.replace(config, tuning={}))
 
 
+def test_the_summary_states_the_pooled_nees_it_flew_not_a_figure_of_another_configuration():
+    """The overconfidence note of summary.md is computed from the flight's own schedules (report.py): the pooled
+    mean NEES and the fraction inside the 95 % region; nothing when no schedule was flown."""
+    from modelgen.navigator.report import _overconfidence_lines
+
+    summary = {"schedules": [{}], "consistency_pooled": {"count": 51, "nees_mean": 2.4712, "inside_95_fraction": 0.86}}
+    (text, _) = _overconfidence_lines(summary)
+    assert "51 outage ends" in text and "mean 2.47 against 2" in text and "86 % inside" in text
+    assert "halves" not in text and "replay_drive_0708_21" not in text
+    assert _overconfidence_lines({"schedules": [], "consistency_pooled": {}}) == []
+
+
 @pytest.mark.parametrize("states, config_name", [(15, "replay_drive_0708.yaml"), (21, "replay_drive_0708_21.yaml")])
-def test_of_the_fixed_points_from_both_starts_the_shipped_one_has_the_higher_log_likelihood(states, config_name):
-    """Stage 7's step 4 (bench/navigator_tuning.py --fixed-point --both-starts): the fixed point is not unique, and
-    of the converged ones, from the shipped and from the white start, the configuration holds the one whose
-    innovations' log-likelihood with GNSS present is higher (a choice the innovations make, not the outages).  The
-    configuration holds it within the iteration's own tolerance (the shipped start's run, from the numbers as
-    written, stops after one iteration that moves them by less than that)."""
+def test_of_the_fixed_points_from_both_starts_the_shipped_one_has_the_higher_thinned_log_likelihood(states, config_name):
+    """Stage 7's step 5 (bench/navigator_tuning.py --fixed-point --both-starts, run again as stage 9 after stage 4
+    was made to pair every update; --select on the committed fixed points): of the converged fixed points, from
+    the shipped and from the white start, the configuration holds the one whose innovations' thinned composite
+    log-likelihood with GNSS present is higher (likelihood.thinned_log_likelihood: a choice the innovations make,
+    not the outages).  The selection scored exactly stage 9's points, and its flights reproduce their white
+    log-likelihoods (stated beside, not used)."""
     import json
 
     from modelgen.navigator import likelihood
     from modelgen.navigator.config import builtin_config_path, load_config
 
-    runs = [json.loads((STAGE4_RESULTS / f"navigator_tuning_stage7_both_starts_{states}{suffix}.json").read_text())
+    runs = [json.loads((STAGE4_RESULTS / f"navigator_tuning_stage9_fixed_point_{states}{suffix}.json").read_text())
             for suffix in ("", "_white")]
     assert [r["start"] for r in runs] == ["shipped", "white"] and all(r["converged"] for r in runs)
     assert all(r["configuration"] == config_name for r in runs)
-    best = max(runs, key=lambda r: r["log_likelihood"]["total"])
+    stage9 = json.loads((STAGE4_RESULTS / "navigator_tuning_stage9_selector.json").read_text())
+    (selection,) = [s for s in stage9["selections"] if s["configuration"] == config_name]
+    assert selection["points"] == {r["start"]: r["fixed_point"] for r in runs}
+    for r in runs:
+        assert selection["white_log_likelihood"][r["start"]]["total"] == pytest.approx(r["log_likelihood"]["total"],
+                                                                                      rel=1e-9)
+    thinned = selection["thinned"]
+    assert selection["chosen"] == max(thinned["total"], key=thinned["total"].get)
+    assert thinned["total"] == pytest.approx({n: sum(r["score"][n] for r in thinned["rows"]) for n in thinned["total"]})
+    assert all(r["step"] == math.ceil(max(r["factors"].values())) for r in thinned["rows"])
+    assert {r["source"] for r in thinned["rows"]} == {"gnss", "nhc", "zupt"} and not thinned["left_out"]
+    (best,) = [r for r in runs if r["start"] == selection["chosen"]]
     config = load_config(builtin_config_path().parent / config_name)
     for key, value in best["fixed_point"].items():
         assert likelihood.parameter_value(config, key) == pytest.approx(value, rel=best["tolerance"]), key
