@@ -140,6 +140,16 @@ _FORCE_REPORT_HELP = "Overwrite report files of the same name that modelgen did 
 _SCHEDULER_HELP = ("Address of an existing dask scheduler (tcp://HOST:8786) to run the runs on; default: a local "
                    "cluster started for this command.")
 _WORKERS_HELP = "Worker processes of the local cluster (default: one per core; at most 4 per core)."
+# the default is modelgen.cluster.CONNECT_TIMEOUT_S, which the CLI does not import (tests/test_architecture.py):
+# None passes it on, and tests/test_cli.py checks that the help names its value
+_CONNECT_TIMEOUT_HELP = ("Seconds to wait for the dask scheduler at --scheduler before calling it unreachable (exit 2); "
+                         "default: 10 s.")
+
+
+def _connect_timeout_option(command):
+    """``--connect-timeout SECONDS`` (None: :data:`modelgen.cluster.CONNECT_TIMEOUT_S`): how long --scheduler is waited for."""
+    return click.option("--connect-timeout", "connect_timeout", type=click.FloatRange(min=0, min_open=True),
+                        default=None, metavar="SECONDS", help=_CONNECT_TIMEOUT_HELP)(command)
 
 
 def _check_workers(ctx: click.Context, param: click.Parameter, value: int | None) -> int | None:
@@ -505,13 +515,14 @@ def covariance(out_dir: str, no_figures: bool, no_sensitivity: bool, force: bool
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default="report/simulation", show_default=True, help="Directory for summary.md and the PNG figures.")
 @click.option("--force", is_flag=True, help=_FORCE_REPORT_HELP)
 @click.option("--scheduler", default=None, metavar="ADDRESS", help=_SCHEDULER_HELP)
+@_connect_timeout_option
 @click.option("--workers", type=click.IntRange(min=1), default=None, help=_WORKERS_HELP, callback=_check_workers)
 @click.option("--history-csv", is_flag=True, help="Also write each correction mode's history (output, estimation error, sigma, NEES per recorded cycle) to history_<mode>.csv as it is flown.")
 @click.option("--model", "model", default=None, metavar="MODEL", help="Filter model (a built-in name or a model file) instead of the profile's filter.model; its parameters are taken by name from the simulation, its filter.parameters constants or its own defaults (README: 'Flying your own model').")
 @click.option("--journal", "journal", type=click.Path(dir_okay=False), default=None, metavar="FILE", help="Keep each completed Monte Carlo run in FILE (JSON lines, written as runs complete); run again with the same FILE to fly only the runs missing from it. A journal of another study (profile, model, filter, seed, runs) is refused.")
 def simulate(profile: str, hours: float | None, runs: int, imu_rate: float | None, seed: int, out_dir: str,
-             implementation: str, force: bool, scheduler: str | None, workers: int | None, history_csv: bool,
-             model: str | None, journal: str | None) -> None:
+             implementation: str, force: bool, scheduler: str | None, connect_timeout: float | None, workers: int | None,
+             history_csv: bool, model: str | None, journal: str | None) -> None:
     """Fly a scenario: truth, IMU/Doppler/GPS, strapdown, filter in three correction modes, Monte Carlo.
 
     Writes summary.md (errors per correction mode, NEES test, timings) and PNG
@@ -526,7 +537,8 @@ def simulate(profile: str, hours: float | None, runs: int, imu_rate: float | Non
     scenario = flight_scenario(profile, hours, imu_rate, model)
     with ReportUpdate(Path(out_dir), force=force) as staged:
         summary = simulate_flight(scenario, staged.staging, runs, seed, implementation, echo=_mapped_echo(staged, err=True),
-                                  scheduler=scheduler, workers=workers, history_csv=history_csv, journal=journal)
+                                  scheduler=scheduler, workers=workers, history_csv=history_csv, journal=journal,
+                                  connect_timeout_s=connect_timeout)
         summary = staged.final(summary)
         staged.commit()
     click.echo(f"wrote {summary}")
@@ -542,12 +554,13 @@ def simulate(profile: str, hours: float | None, runs: int, imu_rate: float | Non
 @main.command()
 @click.argument("study_file", metavar="STUDY.yaml")
 @click.option("--scheduler", default=None, metavar="ADDRESS", help=_SCHEDULER_HELP)
+@_connect_timeout_option
 @click.option("--workers", type=click.IntRange(min=1), default=None, help=_WORKERS_HELP, callback=_check_workers)
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default="report/trade", show_default=True, help="Directory for trade.csv, trade.parquet, the figure and summary.md.")
 @click.option("--force", is_flag=True, help=_FORCE_REPORT_HELP)
 @click.option("--journal", "journal", type=click.Path(dir_okay=False), default=None, metavar="FILE", help="Keep each completed covariance task in FILE (JSON lines, written as tasks complete); run again with the same FILE to take a stopped study up where it stopped.")
-def trade(study_file: str, scheduler: str | None, workers: int | None, out_dir: str, force: bool,
-          journal: str | None) -> None:
+def trade(study_file: str, scheduler: str | None, connect_timeout: float | None, workers: int | None, out_dir: str,
+          force: bool, journal: str | None) -> None:
     """Run a trade study: covariance analysis of every case of a grid (or list), Monte Carlo of selected ones.
 
     STUDY.yaml is a study file or a built-in study's name
@@ -560,7 +573,7 @@ def trade(study_file: str, scheduler: str | None, workers: int | None, out_dir: 
 
     with ReportUpdate(Path(out_dir), force=force) as staged:
         files = trade_study(study_file, staged.staging, scheduler, workers, echo=_mapped_echo(staged, err=True),
-                            journal=journal)
+                            journal=journal, connect_timeout_s=connect_timeout)
         files = [staged.final(p) for p in files]
         staged.commit()
     click.echo("wrote " + ", ".join(str(p) for p in files))

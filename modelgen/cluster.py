@@ -221,18 +221,20 @@ def _workers_ignore_interrupts() -> Iterator[None]:
 
 @contextmanager
 def dask_client(scheduler: str | None = None, workers: int | None = None,
-                timeout_s: float = CONNECT_TIMEOUT_S) -> Iterator[Any]:
+                timeout_s: float | None = None) -> Iterator[Any]:
     """A ``distributed.Client`` on ``scheduler`` (an address) or on a new local cluster of ``workers`` processes.
 
     The local cluster has one single-threaded worker process per core (the
     filter loops hold the GIL), listens on the loopback address only (its
     status page on a free port), logs only errors and keeps its diagnostics
     quiet (:data:`LOCAL_CLUSTER_CONFIG`); it is closed on the way out.  A scheduler that does not answer within ``timeout_s`` is
-    refused with a message naming the address.
+    refused with a message naming the address (None: :data:`CONNECT_TIMEOUT_S`, as in the production default).
     """
     import dask
     from distributed import Client, LocalCluster
 
+    if timeout_s is None:
+        timeout_s = CONNECT_TIMEOUT_S
     if scheduler is not None:
         if workers is not None:
             raise ModelError(f"--workers {workers}: sizes the local cluster only; the cluster at --scheduler "

@@ -767,7 +767,7 @@ def check_filter_constants(scenario) -> None:
 
 def simulate_flight(scenario, folder: Path, runs: int, seed: int, implementation: str, echo=print,
                     scheduler: str | None = None, workers: int | None = None, history_csv: bool = False,
-                    journal: str | Path | None = None) -> Path:
+                    journal: str | Path | None = None, connect_timeout_s: float | None = None) -> Path:
     """``modelgen simulate``: fly the scenario (truth, sensors, filter, Monte Carlo) into ``folder``; the summary's path.
 
     The Monte Carlo runs go to ``scheduler`` (an existing dask cluster) or,
@@ -775,7 +775,8 @@ def simulate_flight(scenario, folder: Path, runs: int, seed: int, implementation
     one per core), opened first so that an unreachable address fails at once.
     ``journal`` keeps the completed runs on disk; a rerun of the same study
     with it flies only the missing ones (and opens no local cluster when none
-    is missing); a journal of another study is refused before anything is flown.
+    is missing); a journal of another study is refused before anything is flown.  ``connect_timeout_s``: how
+    long ``scheduler`` is waited for (default :data:`modelgen.cluster.CONNECT_TIMEOUT_S`).
     """
     from modelgen.cluster import dask_client, describe_client
     from modelgen.simulation.flight_report import check_monte_carlo_journal, simulate, start_flight
@@ -792,19 +793,20 @@ def simulate_flight(scenario, folder: Path, runs: int, seed: int, implementation
     if (runs < 2 or complete) and scheduler is None:
         return simulate(scenario, derived, folder, runs=runs, seed=seed, echo=echo, implementation=implementation,
                         history_csv=history_csv, journal=journal, started=started)
-    with dask_client(scheduler, workers) as client:
+    with dask_client(scheduler, workers, timeout_s=connect_timeout_s) as client:
         echo(f"  Monte Carlo on {describe_client(client)}")
         return simulate(scenario, derived, folder, runs=runs, seed=seed, echo=echo, implementation=implementation,
                         client=client, history_csv=history_csv, journal=journal, started=started)
 
 
 def trade_study(study_file: str | Path, folder: Path, scheduler: str | None = None, workers: int | None = None,
-                echo=print, journal: str | Path | None = None) -> list[Path]:
+                echo=print, journal: str | Path | None = None, connect_timeout_s: float | None = None) -> list[Path]:
     """``modelgen trade``: check the study file, run its cases on a dask cluster, write its outputs into ``folder``.
 
     The whole file is checked (and its Monte Carlo profiles built) before the
     cluster is opened or any task submitted.  ``journal`` keeps completed
-    covariance tasks on disk (see :class:`modelgen.cluster.Journal`).
+    covariance tasks on disk (see :class:`modelgen.cluster.Journal`).  ``connect_timeout_s``: how long
+    ``scheduler`` is waited for (default :data:`modelgen.cluster.CONNECT_TIMEOUT_S`).
     """
     from modelgen.cluster import dask_client
     from modelgen.study.outputs import write_outputs
@@ -815,6 +817,6 @@ def trade_study(study_file: str | Path, folder: Path, scheduler: str | None = No
     profiles = monte_carlo_profiles(study)
     echo(f"modelgen trade: {study.name}, {study.case_count} covariance cases"
          + (f", {len(profiles)} Monte Carlo cases" if profiles else ""))
-    with dask_client(scheduler, workers) as client:
+    with dask_client(scheduler, workers, timeout_s=connect_timeout_s) as client:
         result = run_trade(study, client, progress=echo, profiles=profiles, journal=journal)
     return write_outputs(result, folder)

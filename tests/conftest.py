@@ -6,7 +6,9 @@ module (:func:`pytest_xdist_make_scheduler`), so that a module's fixtures are
 made once, on one worker, except in the modules of :data:`SPREAD_MODULES`,
 whose tests are independent and handed out one by one, and of the long
 tests of :data:`SOLO_TESTS`, handed out on their own; tests marked
-``xdist_group(name)`` all run on one worker, one after another.
+``xdist_group(name)`` all run on one worker, one after another, as do the
+units of :data:`SHARED_WORKER_UNITS` that share a name.  The longest units are
+handed out first (:data:`FIRST_MODULES`).
 """
 
 import functools
@@ -30,16 +32,28 @@ SPREAD_MODULES = ("tests/test_corpus.py", "tests/embedded/test_cppcheck.py")
 #: fixtures, so that the rest of the module runs on another worker meanwhile.
 SOLO_TESTS = ("tests/test_cli.py::test_run_does_the_main_job_end_to_end",)
 
-#: Modules handed out first, in this order: a worker's first module runs before any other test has left a
+#: Work units that run on one worker, one after another, so that the worker's per-process caches serve them all:
+#: the main job and the Python Filter's conformance check of every built-in model derive the same built-in
+#: models (derived_builtin) and load the same generated modules, whose numba predict kernels
+#: (modelgen.codegen.build.load_python_module) are then compiled once instead of once on each worker.
+SHARED_WORKER_UNITS = {SOLO_TESTS[0]: "builtin-models", "tests/codegen/test_python_filter_class.py": "builtin-models"}
+
+#: Units handed out first, in this order: a worker's first module runs before any other test has left a
 #: thread behind (dask's, a figure thread), and the figure process forks only a process without threads;
-#: then the longest tests and modules, so that no long one is left for the end.
-FIRST_MODULES = ("tests/simulation/test_flight_report.py", *SOLO_TESTS, "tests/test_cli.py", "tests/codegen/test_c_contract.py",
-                 "tests/test_cluster.py")
+#: then the longest units (CPU seconds with -n0, issue 29: the builtin-models group about 120 s, the others
+#: 30-100 s), so that no long one is left for the end and the two workers end together.
+FIRST_MODULES = ("tests/simulation/test_flight_report.py", "builtin-models", "tests/test_cli.py",
+                 "tests/codegen/test_lane_pairs.py", "tests/codegen/test_contract.py",
+                 "tests/navigator/test_navigator_markov.py", "tests/navigator/test_navigator_smoother_generated.py",
+                 "tests/codegen/test_options.py", "tests/navigator/test_navigator.py",
+                 "tests/navigator/test_navigator_spec.py", "tests/codegen/test_large_models.py",
+                 "tests/codegen/test_c_contract.py", "tests/test_cluster.py")
 
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
-    """Under ``--dist loadgroup`` (the default here): one work unit per module, per xdist_group, per spread and per solo test."""
+    """Under ``--dist loadgroup`` (the default here): one work unit per module, per xdist_group, per spread and per solo test,
+    and one for each name of :data:`SHARED_WORKER_UNITS`."""
     if config.getoption("dist") != "loadgroup":
         return None
     from xdist.scheduler import LoadGroupScheduling
@@ -52,7 +66,8 @@ def pytest_xdist_make_scheduler(config, log):
             if scope != nodeid:  # an xdist_group
                 return scope
             module = nodeid.split("::", 1)[0]
-            return nodeid if module in SPREAD_MODULES or nodeid in SOLO_TESTS else module
+            unit = nodeid if module in SPREAD_MODULES or nodeid in SOLO_TESTS else module
+            return SHARED_WORKER_UNITS.get(unit, unit)
 
         def _assign_work_unit(self, node) -> None:
             for module in FIRST_MODULES:
@@ -62,6 +77,15 @@ def pytest_xdist_make_scheduler(config, log):
             super()._assign_work_unit(node)
 
     return ModuleScheduling(config, log)
+
+
+def pytest_unconfigure(config):
+    """The session is over: skip the interpreter's last garbage collection at exit (gc.freeze, as ``modelgen simulate``
+    does), a walk over every object a worker made (sympy's, numba's, matplotlib's); the operating system frees the
+    memory.  Run at the end of each worker, this is time of the run's tail."""
+    import gc
+
+    gc.freeze()
 
 
 def pytest_addoption(parser):

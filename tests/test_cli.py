@@ -115,6 +115,31 @@ def test_simulate_flies_a_profile_with_the_generated_c_filter_and_writes_summary
     assert not [p for p in out.rglob("*.so")]  # the filter was built in a temporary folder
 
 
+def test_the_scheduler_connect_timeout_is_ten_seconds_unless_told(monkeypatch):
+    """--connect-timeout of simulate and trade defaults to modelgen.cluster.CONNECT_TIMEOUT_S, 10 s, and so does
+    dask_client; the corpus's unreachable-scheduler cases (tests/corpus/trade_studies.yaml) set 1 s and see it named."""
+    from modelgen import cluster
+    from modelgen.cli import simulate, trade
+    from modelgen.errors import ModelError
+
+    assert cluster.CONNECT_TIMEOUT_S == 10.0
+    for command in (simulate, trade):  # None: dask_client's default (the CLI does not import modelgen.cluster)
+        (option,) = [p for p in command.params if p.name == "connect_timeout"]
+        assert option.default is None and "--connect-timeout" in option.opts
+        assert f"default: {cluster.CONNECT_TIMEOUT_S:g} s" in option.help
+    waited = []
+
+    def connect_within(connect, scheduler, timeout_s):
+        waited.append(timeout_s)
+        raise ModelError("not connecting")
+
+    monkeypatch.setattr(cluster, "_connect_within", connect_within)
+    for told in (None, 2.5):
+        with pytest.raises(ModelError, match="not connecting"), cluster.dask_client("tcp://127.0.0.1:9", timeout_s=told):
+            pass
+    assert waited == [10.0, 2.5]
+
+
 def test_simulate_refuses_an_unknown_filter_implementation(runner, tmp_path):
     result = runner.invoke(main, ["simulate", "--filter", "fortran", "--out", str(tmp_path)])
     assert result.exit_code != 0 and "fortran" in result.output

@@ -329,15 +329,24 @@ def test_a_journal_is_checked_before_any_work_without_writing_to_it(tmp_path):
 
 
 def test_modelgen_simulate_journal_keeps_the_runs_and_refuses_another_study(tmp_path):
+    """The first run is a process of its own (``python -m modelgen``, with a local cluster of worker processes);
+    the two that start no cluster run in this process (tests/cli_in_process.py: as the process would, exit
+    code and outputs; it saves two interpreters' start-up and imports)."""
+    from cli_in_process import run_modelgen
+
     journal = tmp_path / "runs.jsonl"
 
-    def simulate(*extra: str) -> subprocess.CompletedProcess:
-        return subprocess.run([sys.executable, "-m", "modelgen", "simulate", "--hours", "0.02", "--imu-rate", "20",
-                               "--runs", "2", "--workers", "1", "--filter", "reference", "--journal", str(journal),
-                               "--out", str(tmp_path / "sim"), "--force", *extra],
-                              capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    def simulate(*extra: str, in_process: bool = True) -> subprocess.CompletedProcess:
+        argv = ["simulate", "--hours", "0.02", "--imu-rate", "20", "--runs", "2", "--workers", "1", "--filter",
+                "reference", "--journal", str(journal), "--out", str(tmp_path / "sim"), "--force", *extra]
+        if in_process:
+            result = run_modelgen(argv, cwd=tmp_path, timeout=300)
+            assert result is not None, "modelgen simulate ran longer than 300 s"
+            return result
+        return subprocess.run([sys.executable, "-m", "modelgen", *argv], capture_output=True, text=True, cwd=tmp_path,
+                              timeout=300)
 
-    first = simulate()
+    first = simulate(in_process=False)
     assert first.returncode == 0, first.stderr
     kept = journal.read_text()
     assert len(kept.splitlines()) == 3  # the study's header and both runs

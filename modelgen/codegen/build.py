@@ -38,6 +38,7 @@ import sys
 import tempfile
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 import numpy as np
 
@@ -246,17 +247,37 @@ def store_library(folder: Path, key: str, payload: bytes) -> Path | None:
     return kept
 
 
+#: The numba-compiled predict kernel (``_compiled_predict``) of each generated module text this process has loaded,
+#: by the SHA-256 of the text: numba compiles on the first call (about 2 s) and keeps nothing on disk for a
+#: module loaded from a file, so a module loaded again from the same text (another folder, another test,
+#: another check) takes the kernel compiled for the first.  Numba freezes the module's globals (N_STATES, the
+#: _KERNEL_* arrays) into the kernel as constants: they are part of the text, so the same text means the same
+#: kernel.  In memory only; nothing is written beside the module or anywhere else.
+_COMPILED_PREDICT_BY_TEXT: dict[str, Any] = {}
+
+
 def load_python_module(path: Path) -> ModuleType:
-    """Import a generated Python module from its file, under a unique name."""
+    """Import a generated Python module from its file, under a unique name.
+
+    Its numba predict kernel is the one already compiled in this process for the same module text, if any
+    (:data:`_COMPILED_PREDICT_BY_TEXT`).
+    """
     path = Path(path)
     digest = hashlib.sha1(str(path.resolve()).encode()).hexdigest()[:10]
     name = f"modelgen_generated_{path.stem}_{digest}"
     spec = importlib.util.spec_from_file_location(name, path)
     if spec is None or spec.loader is None:
         raise ModelError(f"{path}: cannot be imported as a Python module")
+    try:
+        text_digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError as exc:
+        raise ModelError(f"{path}: cannot be read ({exc.strerror or exc})") from None
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     spec.loader.exec_module(module)
+    kernel = getattr(module, "_compiled_predict", None)
+    if getattr(module, "COMPILED", False) and hasattr(kernel, "py_func"):  # a numba dispatcher
+        module._compiled_predict = _COMPILED_PREDICT_BY_TEXT.setdefault(text_digest, kernel)
     return module
 
 

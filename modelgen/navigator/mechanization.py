@@ -60,6 +60,25 @@ def model_rates(source: str, name: str) -> Callable:
     return numba.njit(fastmath=False, nogil=True)(function)
 
 
+#: :func:`model_rates` of each (source, name) this process has asked :func:`shared_model_rates` for.
+_SHARED_RATES: dict[tuple[str, str], Callable] = {}
+
+
+def shared_model_rates(source: str, name: str) -> Callable:
+    """:func:`model_rates`, made once per process for each source and name and then shared.
+
+    numba compiles the rates on their first call, and :func:`mechanize` once more for each rates function it
+    is given (a compiled function is a type of its own): a process that makes the navigator of one model
+    again (each replay, each check of a navigator) flies the same compiled code instead of compiling both
+    again.  The source is the whole function, so the same source is the same rates.
+    """
+    key = (source, name)
+    rates = _SHARED_RATES.get(key)
+    if rates is None:
+        rates = _SHARED_RATES.setdefault(key, model_rates(source, name))
+    return rates
+
+
 @compiled
 def quaternion_to_dcm(q0: float, q1: float, q2: float, q3: float) -> np.ndarray:
     """C_b^n of a body-to-NED quaternion (scalar first)."""

@@ -598,10 +598,10 @@ def spec_of(derived, model_file: Path, with_python: bool = True) -> NavigatorSpe
                          expressions, free, defaults, rates_python=python_source(rates), rates_c=c_source(rates),
                          carried=carried)
     if with_python:
-        from modelgen.navigator.mechanization import model_rates
+        from modelgen.navigator.mechanization import shared_model_rates
 
         spec.module = _python_module(derived)
-        spec.rates = model_rates(spec.rates_python, model.name)
+        spec.rates = shared_model_rates(spec.rates_python, model.name)
     return spec
 
 

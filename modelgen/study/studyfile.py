@@ -38,6 +38,7 @@ value out of range (a negative sigma, a latitude at a pole...) is a
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 import re
@@ -56,7 +57,7 @@ from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path, read_yaml_with_lines
 from modelgen.model.declaration import ErrorModel
 from modelgen.model.file_fields import is_number
-from modelgen.model.loading import load_model
+from modelgen.model.loading import builtin_model_path, load_model
 from modelgen.model.units import to_si
 from modelgen.simulation.profile_keys import check_flight_size
 
@@ -474,6 +475,19 @@ def _monte_carlo(r: _Reader, raw: Any, parameters: Sequence[Parameter], filters:
     return MonteCarloChoice(profile, hours, rate, runs, seed, tuple(p for p, _ in cases))
 
 
+@functools.lru_cache(maxsize=None)
+def _builtin_truth(name: str) -> ErrorModel:
+    """The built-in model ``name``, loaded once in this process (a model is frozen, a package file fixed)."""
+    return load_model(name)
+
+
+def _truth_model(model: str) -> ErrorModel:
+    """The study's truth model: a built-in one (its name, no file of that name here) loaded once per process, else the file."""
+    if not Path(model).exists() and builtin_model_path(model) is not None:
+        return _builtin_truth(model)
+    return load_model(model)
+
+
 def load_study(path: str | Path) -> Study:
     """Read and check a study file (module docstring); nothing is run."""
     path = Path(path)
@@ -494,7 +508,7 @@ def load_study(path: str | Path) -> Study:
     budget_file = _data_file(r.text(data.get("budget", BUDGET_FILE), "budget"), study_dir)
     scenario = load_analysis_scenario(scenario_file)
     budget = load_error_budget(budget_file)
-    truth = load_model(model)
+    truth = _truth_model(model)
     budget.initial_covariance(truth)  # every state budgeted, or refused now
     missing = [s for s in ("latitude_error", "longitude_error") if s not in truth.state_names]
     if missing:

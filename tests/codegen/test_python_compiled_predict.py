@@ -86,3 +86,25 @@ def test_a_refused_compiled_filter_predict_leaves_the_filter_unchanged(py, argum
     with pytest.raises(ValueError, match=f"predict: {argument}"):
         f.predict(bad["Phi"], bad["Qd"])
     assert state_of(f) == before
+
+
+def test_a_module_of_the_same_text_takes_the_kernel_already_compiled_and_another_text_its_own(py, arguments, tmp_path):  # noqa: F811
+    """load_python_module keeps one compiled kernel per module text in the process (numba compiles on the first
+    call, seconds): the same text from another folder shares it, any other text compiles its own."""
+    from pathlib import Path
+
+    from modelgen.codegen.build import load_python_module
+
+    text = Path(py.__file__).read_text()
+    (tmp_path / "same").mkdir()
+    (tmp_path / "same" / "m.py").write_text(text)
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "m.py").write_text(text + "\n# another text\n")
+    same, other = load_python_module(tmp_path / "same" / "m.py"), load_python_module(tmp_path / "other" / "m.py")
+    assert same is not py and same._compiled_predict is py._compiled_predict
+    assert other._compiled_predict is not py._compiled_predict
+    a = arguments
+    for module in (same, other):
+        x, P = np.empty(18), np.empty((18, 18))
+        assert module._compiled_predict(a["x"], a["P"], a["Phi"], a["Qd"], x, P, True)
+        assert close(x, a["Phi"] @ a["x"]) and np.array_equal(P, P.T)

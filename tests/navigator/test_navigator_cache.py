@@ -2,22 +2,21 @@
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[2]
 DATA = Path(__file__).parent / "data"
 
 
 @pytest.mark.flight
 def test_replay_with_a_relative_cache_dir_is_one_error_line_and_writes_nothing(tmp_path):
-    env = {**os.environ, "MODELGEN_CACHE_DIR": "relcache", "PYTHONPATH": str(REPO)}
-    run = subprocess.run([sys.executable, "-m", "modelgen", "replay", str(DATA / "excerpt.yaml"), "--out", "out",
-                          "--no-figures"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+    """Run in this process as ``python -m modelgen`` would run it (tests/cli_in_process.py: exit code, outputs)."""
+    from cli_in_process import RUN_ENVIRONMENT, run_modelgen
+
+    run = run_modelgen(["replay", DATA / "excerpt.yaml", "--out", "out", "--no-figures"], cwd=tmp_path, timeout=300,
+                       environment={**RUN_ENVIRONMENT, "MODELGEN_CACHE_DIR": "relcache"})
+    assert run is not None, "modelgen replay ran longer than 300 s"
     assert run.returncode == 2
     errors = [line for line in run.stderr.splitlines() if line.startswith("modelgen: error:")]
     assert errors == ["modelgen: error: $MODELGEN_CACHE_DIR 'relcache' is not an absolute path: the compile cache "
