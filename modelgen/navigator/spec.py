@@ -612,6 +612,17 @@ _IMU_NOISES = (("gyro", "gyro", "gyro_angle_random_walk", "rad/sqrt(s)", "noise.
                ("accelerometer", "accel", "accel_velocity_random_walk", "m/s/sqrt(s)", "noise.accel_white"))
 
 
+def _unreachable(psd, parameter: str, symbols: dict[str, str], expressions: dict[str, str]) -> str | None:
+    """Why the configuration cannot set a noise whose PSD is ``psd`` through ``parameter``, or None when it can: the
+    PSD uses the parameter and the parameter has no default (the navigator sets only parameters without one)."""
+    wanted = symbols.get(parameter) if parameter in expressions else None
+    if wanted is not None and wanted in {str(s) for s in getattr(psd, "free_symbols", ())}:
+        return None
+    if parameter in symbols and parameter not in expressions:
+        return f"its parameter {parameter} has a default value, which the navigator then leaves as it is"
+    return f"its PSD {psd} does not use the parameter {parameter}"
+
+
 def _check_imu_noises(model, expressions: dict[str, str], model_file: Path) -> None:
     """Refuse a navigation: section whose IMU white noise the configuration's ``noise`` cannot reach.
 
@@ -629,15 +640,11 @@ def _check_imu_noises(model, expressions: dict[str, str], model_file: Path) -> N
         noise = getattr(sensor, "noise", None)
         if noise is None:
             continue
-        wanted = symbols.get(parameter) if parameter in expressions else None
         for symbol in noise:
             name, psd = psd_of.get(str(symbol), (str(symbol), None))
-            used = {str(s) for s in getattr(psd, "free_symbols", ())}
-            if wanted is not None and wanted in used:
+            why = _unreachable(psd, parameter, symbols, expressions)
+            if why is None:
                 continue
-            why = (f"its parameter {parameter} has a default value, which the navigator then leaves as it is"
-                   if parameter in symbols and parameter not in expressions else
-                   f"its PSD {psd} does not use the parameter {parameter}")
             raise ModelError(f"{_line_of(model_file, (f'navigation.noises.{key}', 'navigation.noises', 'navigation'))}: "
                              f"white noise {name}: {why}; the navigator sets this noise from the configuration's "
                              f"{config_key} only through a parameter {parameter} [{unit}] declared without a value "
@@ -657,7 +664,6 @@ def _check_bias_driving_noises(derived, blocks: dict[str, Block], expressions: d
     for kind, parameter, unit, config_key in (
             ("gyro_bias", "gyro_bias_driving_noise", "rad/s/sqrt(s)", "noise.gyro_bias_driving"),
             ("accel_bias", "accel_bias_driving_noise", "m/s^2/sqrt(s)", "noise.accel_bias_driving")):
-        wanted = symbols.get(parameter) if parameter in expressions else None
         for i in (blocks[kind].indices if kind in blocks else ()):
             if F[i, i] != 0:
                 continue
@@ -665,12 +671,9 @@ def _check_bias_driving_noises(derived, blocks: dict[str, Block], expressions: d
                 if G[i, k] == 0:
                     continue
                 noise = model.noises[k]
-                psd = model.noise_psd.get(noise.name)
-                if wanted is not None and wanted in {str(x) for x in getattr(psd, "free_symbols", ())}:
+                why = _unreachable(model.noise_psd.get(noise.name), parameter, symbols, expressions)
+                if why is None:
                     continue
-                why = (f"its parameter {parameter} has a default value, which the navigator then leaves as it is"
-                       if parameter in symbols and parameter not in expressions else
-                       f"its PSD {psd} does not use the parameter {parameter}")
                 at = noise.place("psd") or model.states[i].place() or _line_of(model_file, ("navigation.sensor_errors",))
                 raise ModelError(f"{at}: random-walk driving noise {noise.name} of {model.states[i].name}: {why}; "
                                  f"the navigator sets it from the configuration's {config_key} only through a "
