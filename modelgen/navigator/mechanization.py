@@ -32,6 +32,7 @@ samples are bridged), the fixed, numerically delicate part:
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Callable
 
@@ -60,10 +61,7 @@ def model_rates(source: str, name: str) -> Callable:
     return numba.njit(fastmath=False, nogil=True)(function)
 
 
-#: :func:`model_rates` of each (source, name) this process has asked :func:`shared_model_rates` for.
-_SHARED_RATES: dict[tuple[str, str], Callable] = {}
-
-
+@functools.lru_cache(maxsize=None)
 def shared_model_rates(source: str, name: str) -> Callable:
     """:func:`model_rates`, made once per process for each source and name and then shared.
 
@@ -72,11 +70,7 @@ def shared_model_rates(source: str, name: str) -> Callable:
     again (each replay, each check of a navigator) flies the same compiled code instead of compiling both
     again.  The source is the whole function, so the same source is the same rates.
     """
-    key = (source, name)
-    rates = _SHARED_RATES.get(key)
-    if rates is None:
-        rates = _SHARED_RATES.setdefault(key, model_rates(source, name))
-    return rates
+    return model_rates(source, name)
 
 
 @compiled
