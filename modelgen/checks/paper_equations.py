@@ -61,7 +61,8 @@ from modelgen.derivation.symbolic import DerivedModel
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path, read_yaml, read_yaml_with_lines
 from modelgen.fileio.output import write_text_atomically
-from modelgen.model.declaration import ErrorModel, parse_expression
+from modelgen.model.declaration import ErrorModel
+from modelgen.model.expression import parse_expression
 from modelgen.model.loading import load_model
 
 #: The core paper's transcribed equations.

@@ -29,7 +29,8 @@ import sympy as sp
 
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path, read_yaml, read_yaml_with_lines
-from modelgen.model.declaration import ErrorModel, _check_defined, parse_expression
+from modelgen.model.declaration import ErrorModel
+from modelgen.model.expression import check_defined, parse_expression
 from modelgen.model.vectors import MAX_TREE_NODES, tree_size
 
 MATRICES = ("F", "G", "H")
@@ -403,7 +404,7 @@ def _entries(
                 "written out; write it in a smaller form"
             )
         if subs:  # the comparison expands it: bounded, defined and finite as a model's expressions are
-            _check_defined(value, f"{key[0]}({key[1]},{key[2]}) with the entries it refers to written out", place)
+            check_defined(value, f"{key[0]}({key[1]},{key[2]}) with the entries it refers to written out", place)
         resolved[key] = value
         return value
 

@@ -23,7 +23,8 @@ from typing import Iterable, Mapping
 import sympy as sp
 
 from modelgen.errors import ModelError
-from modelgen.model.declaration import ErrorModel, Measurement, Noise, Parameter, State, parse_expression
+from modelgen.model.declaration import ErrorModel, Measurement, Noise, Parameter, State
+from modelgen.model.expression import parse_expression
 
 
 # -- helpers ------------------------------------------------------------------

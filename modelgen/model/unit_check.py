@@ -163,9 +163,9 @@ def declared_units(model, undeclared: Iterable[str] = (), where=None) -> dict[sp
 
 def check_model_units(model, locations: Mapping[str, str] | None = None, undeclared: Iterable[str] = ()) -> None:
     """Refuse a model whose equations, measurements, PSDs or variances mix units (module doc)."""
-    from modelgen.model.declaration import _Locator  # the same file:line prefixes as the model's other checks
+    from modelgen.model.declaration import Locator  # the same file:line prefixes as the model's other checks
 
-    where = _Locator(model.name, locations or {})
+    where = Locator(model.name, locations or {})
     skip = set(undeclared)
     units = declared_units(model, skip, where)
     by_symbol = {**{s.sym: s for s in model.states}, **{n.sym: n for n in model.noises}, **{m.sym: m for m in model.measurements}}

@@ -28,14 +28,14 @@ from typing import Any, Callable, Mapping, Sequence
 import sympy as sp
 
 from modelgen.errors import ModelError
-from modelgen.model.declaration import (
+from modelgen.model.declaration import check_identifier
+from modelgen.model.expression import (
     ALLOWED_FUNCTIONS,
     MAX_EXPRESSION_LENGTH,
-    _check_defined,
-    _check_syntax,
-    _check_tokens,
-    _excerpt,
-    check_identifier,
+    check_defined,
+    check_syntax,
+    check_tokens,
+    excerpt,
 )
 
 #: A value in a vector expression: a sympy scalar or a sympy Matrix.
@@ -196,7 +196,7 @@ def parse_vector_expression(text: str | sp.Expr | float | int, namespace: Mappin
         known = set().union(*(v.free_symbols for v in namespace.values() if isinstance(v, (sp.Basic, sp.MatrixBase))))
         unknown = sorted(str(x) for x in text.free_symbols - known)
         if unknown:
-            raise ModelError(f"{where}: unknown symbol(s) {', '.join(unknown)} in {_excerpt(str(text))}")
+            raise ModelError(f"{where}: unknown symbol(s) {', '.join(unknown)} in {excerpt(str(text))}")
         return _checked_result(_as_scalar_if_1x1(text), str(text), where)
     if not isinstance(text, str):
         raise ModelError(f"{where}: expected an expression, got {type(text).__name__}")
@@ -207,9 +207,9 @@ def parse_vector_expression(text: str | sp.Expr | float | int, namespace: Mappin
     for name, value in namespace.items():
         functions.pop(name, None)  # a declared name shadows a library name
         values[name] = value
-    _check_tokens(text, where)
+    check_tokens(text, where)
     try:
-        _check_syntax(text, {**values, **functions}, where)
+        check_syntax(text, {**values, **functions}, where)
     except ModelError as exc:
         if "unknown function" not in str(exc):
             raise
@@ -224,13 +224,13 @@ def _checked_result(result: Value, text: str, where: str) -> Value:
     """``result`` once each element is an expression, of bounded size, defined and finite (else ModelError)."""
     for element in (list(result) if is_matrix(result) else [result]):
         if not isinstance(element, sp.Expr):
-            raise ModelError(f"{where}: {_excerpt(text)} is not an expression")
+            raise ModelError(f"{where}: {excerpt(text)} is not an expression")
         if tree_size(element, MAX_TREE_NODES) > MAX_TREE_NODES:
             raise ModelError(
-                f"{where}: {_excerpt(text)} grows to more than {MAX_TREE_NODES} operations once the definitions "
+                f"{where}: {excerpt(text)} grows to more than {MAX_TREE_NODES} operations once the definitions "
                 "it uses are written out; write it in a smaller form"
             )
-        _check_defined(element, text, where)
+        check_defined(element, text, where)
     return result
 
 
@@ -264,7 +264,7 @@ class _Evaluator:
     def fail(self, node: ast.AST, problem: str) -> ModelError:
         """A ModelError for ``node``: where, the problem, and the part of the text it is about."""
         part = ast.get_source_segment(self.source, node) or self.source
-        shown = f" in {_excerpt(part)}" if part != self.source else f" in {_excerpt(self.source)}"
+        shown = f" in {excerpt(part)}" if part != self.source else f" in {excerpt(self.source)}"
         return ModelError(f"{self.where}: {problem}{shown}")
 
     def evaluate(self, node: ast.AST) -> Value:

@@ -11,7 +11,8 @@ import sympy as sp
 from modelgen.derivation.casadi_functions import build_casadi_model, sympy_to_casadi
 from modelgen.derivation.symbolic import derive
 from modelgen.errors import ModelError
-from modelgen.model.declaration import ALLOWED_FUNCTIONS, ErrorModel, Parameter, State
+from modelgen.model.declaration import ErrorModel, Parameter, State
+from modelgen.model.expression import ALLOWED_FUNCTIONS
 from modelgen.model.loading import builtin_models, load_model
 
 RELATIVE_TOLERANCE = 1e-12

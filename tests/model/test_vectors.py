@@ -5,7 +5,7 @@ import sympy as sp
 import yaml
 
 from modelgen.errors import ModelError
-from modelgen.model.declaration import parse_expression
+from modelgen.model.expression import parse_expression
 from modelgen.model.loading import builtin_model_path, builtin_models
 from modelgen.model.vectors import (
     VECTOR_FUNCTIONS,

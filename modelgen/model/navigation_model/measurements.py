@@ -14,7 +14,8 @@ from typing import Callable, Mapping, Sequence
 import sympy as sp
 
 from modelgen.errors import ModelError
-from modelgen.model.declaration import Measurement, Noise, State, parse_expression
+from modelgen.model.declaration import Measurement, Noise, State
+from modelgen.model.expression import parse_expression
 from modelgen.model.file_fields import scalar_text
 from modelgen.model.mechanizations.local_level import metres_matrix
 from modelgen.model.navigation_model.expressions import expression_measurement

@@ -13,7 +13,8 @@ from typing import Callable, Mapping, Sequence
 import sympy as sp
 
 from modelgen.errors import ModelError
-from modelgen.model.declaration import Noise, State, parse_expression
+from modelgen.model.declaration import Noise, State
+from modelgen.model.expression import parse_expression
 from modelgen.model.file_fields import scalar_text
 from modelgen.model.navigation_model.section import (
     PROCESSES,
