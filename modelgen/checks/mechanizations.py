@@ -1,4 +1,4 @@
-"""The mechanizations cross-checked (issue 27 item 1): ECEF and wander azimuth against local level, and the poles.
+"""The mechanizations cross-checked: ECEF and wander azimuth against local level, and the poles.
 
 The same 21-state INS/GNSS filter ships in three mechanizations:
 ``modelgen/data/mechanizations/ins_gnss21_ecef.yaml`` (phi^e, dv^e, dr^e),
@@ -468,7 +468,7 @@ def write_mechanizations_report(checks: MechanizationChecks, folder: str | Path)
 
 def report_section_text(checks: MechanizationChecks) -> str:
     """The run report's section body: per check the worst ratio of difference to bound, the polar flight, links."""
-    lines = ["Issue 27's cross-checks of the same 21-state INS/GNSS filter in three mechanizations, entry by entry at "
+    lines = ["Cross-checks of the same 21-state INS/GNSS filter in three mechanizations, entry by entry at "
              "realistic points (45 N, 34 S 11 km, 78 N, the equator, 89.9 N), each matrix held to a stated bound.", "",
              "| check | comparisons | passed | worst difference / bound |", "|---|---|---|---|"]
     for check, title in CHECK_TITLES.items():
