@@ -15,6 +15,10 @@ A user model without one is checked over a synthetic operating point, which
 checks the code, not the navigation, and is labelled so.  The pass criterion
 is computed per run from its conditioning (modelgen.checks.code_check).
 :func:`main_job` is ``modelgen run``.
+
+Two parts live in modules of their own: :mod:`modelgen.jobs.scenarios` (the
+operating points a model is checked and analysed at) and
+:mod:`modelgen.jobs.run_report` (the main job's report, section by section).
 """
 
 from __future__ import annotations
@@ -25,13 +29,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
 from modelgen.codegen.options import CodegenOptions
 from modelgen.errors import ModelError
 from modelgen.fileio.datafiles import data_path
 from modelgen.fileio.output import FolderUpdate, write_text_atomically
-from modelgen.model.sources import cite_sources
+# the jobs' API includes the main job's report sections and the scenarios a model is checked at (their modules)
+from modelgen.jobs.run_report import (  # noqa: F401
+    ReportSection, conformance_section, mechanizations_section, missed_targets, replay_section, run_report,
+    verification_summary)
+from modelgen.jobs.scenarios import (  # noqa: F401
+    check_scenario, declared_scenario, observability_defaults, paper_operating_point, paper_parameters, paper_scenario,
+    synthetic_scenario)
 
 if TYPE_CHECKING:
     from modelgen.derivation.symbolic import DerivedModel
@@ -112,7 +120,6 @@ class DerivedModels:
         if key not in self._derived:
             self._derived[key] = load_and_derive(reference)
         return self._derived[key]
-
 
 
 @dataclass(frozen=True)
@@ -201,71 +208,6 @@ def generate(
     return GenerationResult(derived, code, folder, checks, tuple(folder / name for name in sorted(code.files)))
 
 
-def synthetic_scenario(derived: DerivedModel, seed: int = 0, steps: int = 100) -> CheckScenario:
-    """A well-conditioned operating point for checking code of a model without a ``check:`` section.
-
-    Parameters without a default are drawn from [0.2, 1.0]; the step is
-    chosen so that ||F T|| is about 0.5, which keeps the Taylor series and the
-    covariance well scaled whatever the model's units.  It checks the code,
-    not the navigation (an attitude matrix drawn so is no rotation), and says
-    so in its label.
-    """
-    from modelgen.checks.code_check import CheckScenario
-
-    rng = np.random.default_rng(seed)
-    values = {p.name: float(rng.uniform(0.2, 1.0)) for p in derived.model.parameters if p.value is None}
-    F = derived.numeric(values)["F"]
-    norm = float(np.linalg.norm(F, 2))
-    step = 0.5 / norm if norm > 0 else 1.0
-    x0 = rng.standard_normal(derived.n_states)
-    label = "synthetic operating point (the model declares no check: section; parameters drawn from [0.2, 1])"
-    return CheckScenario(values, np.eye(derived.n_states), step=step, steps=steps, seed=seed, initial_state=x0, label=label)
-
-
-def paper_parameters() -> dict[str, float]:
-    """The core paper's level-flight operating point and Table 1 statistics, by ned_doppler18 parameter name."""
-    from modelgen.table2.budget import load_error_budget
-    from modelgen.table2.scenario import load_analysis_scenario, operating_point
-
-    return {**load_error_budget().parameters, **operating_point(load_analysis_scenario())}
-
-
-def paper_scenario(derived: DerivedModel) -> CheckScenario:
-    """The core paper's 4-hour scenario: level flight, Table 1 errors, T = 60 s."""
-    from modelgen.table2.budget import load_error_budget
-    from modelgen.table2.scenario import load_analysis_scenario
-    from modelgen.checks.code_check import CheckScenario
-
-    flight, budget = load_analysis_scenario(), load_error_budget()
-    values = paper_parameters()
-    label = "the core paper's scenario (level flight east at 30 N, Table 1, 240 steps of 60 s)"
-    return CheckScenario(values, budget.initial_covariance(derived.model), step=flight.step_s, steps=flight.steps, label=label)
-
-
-def declared_scenario(derived: DerivedModel) -> CheckScenario | None:
-    """The scenario of the model file's ``check:`` section (modelgen.model.check_scenario), if it has one.
-
-    The initial state is drawn from N(0, P(0)) with the section's seed, so the
-    state propagation is exercised too, not only the covariance.
-    """
-    from modelgen.checks.code_check import CheckScenario
-
-    spec = derived.model.check
-    if spec is None:
-        return None
-    P0 = spec.covariance(derived.model.state_names, derived.model.name)
-    rng = np.random.default_rng(spec.seed + 1)  # not the measurement stream's seed
-    x0 = np.sqrt(np.diag(P0)) * rng.standard_normal(derived.n_states)
-    label = f"the model's check scenario ({spec.steps} steps of {spec.step_s:g} s)"
-    return CheckScenario(spec.parameter_values(), P0, step=spec.step_s, steps=spec.steps, seed=spec.seed, initial_state=x0, label=label,
-                         where=spec.where)
-
-
-def check_scenario(derived: DerivedModel) -> CheckScenario:
-    """What ``--check`` flies: the model's declared scenario, else the synthetic one (labelled so)."""
-    return declared_scenario(derived) or synthetic_scenario(derived)
-
-
 def check(
     derived: DerivedModel, folder: Path, scenario: CheckScenario | None = None, options: CodegenOptions | None = None
 ) -> list[ConformanceResult]:
@@ -308,153 +250,6 @@ def generate_and_check_all(
         result = generate(models.get(name), out_root, force=force, with_check=True)
         runs.append(ModelRun(result, list(result.checks)))
     return runs
-
-
-@dataclass(frozen=True)
-class ReportSection:
-    """One section of the main job's report: its Markdown, the targets it states and the figures it shows.
-
-    Each target is a mapping with ``quantity``, ``reached``, ``target`` and
-    ``met`` (True, False, or None for a row that only informs), as the step
-    that measured it states it (the replay's come from its summary); the
-    report lists them all at its top, and ``modelgen run`` does not say ok
-    while one is missed.  ``figures`` maps a path relative to the report to
-    the figure's one-line caption.
-    """
-
-    title: str
-    text: str
-    targets: tuple[dict, ...] = ()
-    figures: tuple[tuple[str, str], ...] = ()
-
-    def markdown(self) -> str:
-        lines = [f"## {self.title}", "", self.text.rstrip()]
-        for path, caption in self.figures:
-            lines += ["", f"![{Path(path).stem}]({path})", "", caption]
-        return "\n".join(lines)
-
-
-#: how the report names each implementation that a check runs (others by their own name)
-IMPLEMENTATION_NAMES = {"python": "Python", "c": "C", "cpp": "C++"}
-
-
-def conformance_section(runs: list[ModelRun], out_root: Path) -> ReportSection:
-    """The generated code's check: every model's differences from the reference beside the tolerance that bounds them.
-
-    One pair of columns (scaled dP, scaled dx) per implementation the checks ran (Python, C, and C++ where a C++
-    compiler is there), all bounded by the run's tolerance."""
-    order = list(IMPLEMENTATION_NAMES)
-    implementations = sorted({r.implementation for run in runs for r in run.checks},
-                             key=lambda name: (order.index(name) if name in order else len(order), name))
-    names = [IMPLEMENTATION_NAMES.get(name, name) for name in implementations]
-    bounded = f"the {2 * len(names)} scaled columns"
-    text = [
-        f"Check: the generated {', '.join(names[:-1])} and {names[-1]} " if len(names) > 1 else f"Check: the generated {''.join(names)} ",
-    ]
-    text[0] += (
-        "(the C compiled with "
-        "`-std=c99 -Wall -Wextra -Werror -pedantic`) run beside `modelgen.derivation.reference` over each model's "
-        "check scenario (the `check:` section of its file: a physical operating point, realistic sensor "
-        "noise, the source's filter step; `ned_doppler18` flies the paper's 240 steps of 60 s). "
-        "'scaled dP' is max |dP_ij| / sqrt(P_ii P_jj) and 'scaled dx' max |dx_i| / sqrt(P_ii) over all steps. "
-        f"The tolerance bounds {bounded}: the verdict is ok when each of them is below it (and P stays "
-        "symmetric positive definite). It is computed per run from the run's conditioning: 2 (2n + 1) u sum_k rho_k, "
-        "with u = 2^-53 and rho_k the factor by which step k's arithmetic can magnify a rounding "
-        "(`modelgen.checks.code_check.conformance_tolerance`). 'C elementwise dP', max |dP_ij| / |P_ij|, is shown for "
-        "information and bounded by nothing: it is large where an entry of P is near zero."
-    )
-    scaled = "".join(f" | {n} scaled dP | {n} scaled dx" for n in names)
-    text += [
-        "",
-        f"| model | states | scenario | folder | predict (C) | update{scaled} | tolerance (bounds {bounded}) "
-        "| C elementwise dP (not bounded) | verdict |",
-        "|---|---|---|---|---|---" + "|---" * (2 * len(names)) + "|---|---|---|",
-    ]
-    for run in runs:
-        g = run.generation
-        checks = {r.implementation: r for r in run.checks}
-        update = g.code.costs.get("update")
-        scenario = checks["c"].scenario.split(" (")[0]
-        cells = "".join(f" | {checks[i].max_scaled_P:.1e} | {checks[i].max_scaled_x:.1e}" if i in checks else " | - | -"
-                        for i in implementations)
-        text.append(
-            f"| {g.derived.model.name} | {g.derived.n_states} | {scenario} | `{out_root / g.derived.model.name}` "
-            f"| {g.code.costs['predict (C)'].total} flops | {update.total if update else '-'}"
-            f"{' flops' if update else ''}{cells} | {checks['c'].tolerance:.1e} "
-            f"| {checks['c'].max_elementwise_P:.1e} | {'ok' if run.passed else 'FAILED'} |"
-        )
-    passed = sum(run.passed for run in runs)
-    target = {"quantity": f"generated {', '.join(names)} within the conformance tolerance",
-              "reached": f"{passed} of {len(runs)} models", "target": "every model", "met": passed == len(runs)}
-    return ReportSection("Generated code, compiled and checked against the numpy reference", "\n".join(text), (target,))
-
-
-def run_report(verification_summary: str, runs: list[ModelRun], out_root: Path, extra_sections: list,
-               paper_targets: tuple[dict, ...] = ()) -> str:
-    """The Markdown report of the main job (no timestamps: byte-stable).
-
-    ``extra_sections`` are :class:`ReportSection` objects (or plain Markdown,
-    which states no target); the report opens with every section's targets,
-    met or missed, and shows every figure with its caption.
-    """
-    paper = ReportSection("Paper check (the table of F, G, H of the core paper)", verification_summary, paper_targets)
-    sections = [paper, conformance_section(runs, out_root)]
-    sections += [s if isinstance(s, ReportSection) else ReportSection("", s) for s in extra_sections]
-    lines = ["# modelgen run: the core paper's model, end to end", ""]
-    rows = [(s.title.split(" (")[0], t) for s in sections for t in s.targets]  # the section's name without its gloss
-    stated = [(title, t) for title, t in rows if t["met"] is not None]
-    missed = [(title, t) for title, t in stated if not t["met"]]
-    lines += ["## Targets", "",
-              f"{len(stated) - len(missed)} of {len(stated)} stated targets met"
-              + (f", {len(missed)} missed." if missed else ".") + " Each is measured in the section named.", "",
-              "| section | quantity | reached | target | |", "|---|---|---|---|---|"]
-    lines += [f"| {title} | {t['quantity']} | {t['reached']} | {t['target']} | "
-              f"{'' if t['met'] is None else 'met' if t['met'] else '**missed**'} |" for title, t in rows]
-    lines.append("")
-    for section in sections:
-        lines += [section.markdown() if section.title else section.text.rstrip(), ""]
-    return cite_sources("\n".join(lines).rstrip() + "\n")
-
-
-def missed_targets(text: str) -> list[str]:
-    """The targets the main job's report (its text) states as missed, each as 'section: quantity'."""
-    table = text.split("\n## Targets\n", 1)[1].split("\n## ", 1)[0]
-    rows = (line[2:-2].split(" | ") for line in table.splitlines() if line.endswith("| **missed** |"))
-    return [f"{section}: {quantity} ({reached}, target {target})" for section, quantity, reached, target, _ in rows]
-
-
-def paper_operating_point(derived: DerivedModel) -> dict[str, float] | None:
-    """The paper's level-flight values, when they cover every parameter of the model."""
-    values = paper_parameters() if derived.model.frame == "NED" else {}
-    needed = {p.name for p in derived.model.parameters if p.value is None}
-    return values if values and needed <= set(values) else None
-
-
-def observability_defaults(derived: DerivedModel) -> tuple[str, dict[str, float], float | None] | None:
-    """The operating point ``modelgen observability`` uses without a scenario file: label, values, step.
-
-    The core paper's level flight where it covers the model's parameters, else
-    the model file's own check scenario (its values and step), else none.
-    """
-    paper = paper_operating_point(derived)
-    if paper:
-        return "the core paper's level flight (30 N, east, 300 km/h, Table 1 statistics)", paper, None
-    spec = derived.model.check
-    if spec is not None:
-        return f"the model's check scenario (steps of {spec.step_s:g} s)", spec.parameter_values(), spec.step_s
-    return None
-
-
-def verification_summary(result: VerificationResult, markdown: Path, data: Path) -> str:
-    """The paper check in a few lines for the main job's report, with links to the full reports."""
-    counts = result.counts()
-    return (
-        f"{len(result.entries)} entries: "
-        + ", ".join(f"{counts[k]} {k}" for k in counts)
-        + f"; {len(result.unexplained)} unexplained. Differences:\n\n"
-        + "\n".join(f"- {e.matrix}({e.row},{e.column}) {e.status}: {e.classification} - {e.reason}" for e in result.differences)
-        + f"\n\nFull report: [{markdown.name}]({markdown.name}), machine-readable: [{data.name}]({data.name})."
-    )
 
 
 @dataclass(frozen=True)
@@ -544,55 +339,6 @@ def main_job(
     text = run_report(summary, runs, Path(out_root), sections, paper_targets=(paper_target,))
     write_text_atomically(report / "README.md", text)
     return MainJobResult(text, runs, result, twins, mechanizations)
-
-
-def mechanizations_section(checks: MechanizationChecks) -> ReportSection:
-    """The run report's section on :mod:`modelgen.checks.mechanizations`: its table, and its one target (no check failed)."""
-    from modelgen.checks.mechanizations import report_section_text
-
-    failed = checks.failed
-    return ReportSection("Mechanizations cross-checked (ECEF and wander azimuth against local level)", report_section_text(checks),
-                         ({"quantity": "mechanization cross-checks outside their bound (incl. the polar flight)",
-                           "reached": str(len(failed)), "target": "0", "met": not failed},))
-
-
-def replay_section(folder: Path, echo=print) -> ReportSection:
-    """Fly the built-in recorded drive (``modelgen replay``) into ``folder``; the report's section on it.
-
-    Its targets and figure captions are the replay's own (its summary's
-    ``targets``, :data:`modelgen.navigator.report.FIGURE_CAPTIONS`).
-    """
-    from modelgen.navigator.config import builtin_config_path
-    from modelgen.navigator.replay import run_replay
-
-    flown = run_replay(builtin_config_path(), folder, echo=echo)
-    s = flown.summary
-    text = "\n".join([
-        f"The generated C navigator ({s['navigator']}) flown forward in real time over the recorded drive with "
-        f"{s['outage_count']} simulated GNSS outages: end-of-outage horizontal error RMS "
-        f"{s['horizontal_error_end_rms_m']:.2f} m (median {s['horizontal_error_end_median_m']:.2f} m, max "
-        f"{s['horizontal_error_end_max_m']:.2f} m), mean normalized squared horizontal error at the outage "
-        f"ends {s['consistency']['nees_mean']:.1f} (2 for a consistent filter) with "
-        f"{100 * s['consistency']['inside_95_fraction']:.0f} % inside the 95 % region, horizontal RMS against RTK outside outages "
-        f"{s['horizontal_rms_outside_outages_m']:.3f} m.",
-        "",
-        "Details: [replay/summary.md](replay/summary.md)",
-    ])
-    captions = _replay_captions(folder)
-    figures = tuple((f"replay/{name}", caption) for name, caption in captions.items() if (folder / name).is_file())
-    return ReportSection("Recorded car drive (real IMU and RTK GNSS)", text, tuple(flown.targets()), figures)
-
-
-def _replay_captions(folder: Path) -> dict[str, str]:
-    """The replay's figures and their captions, as its summary.json states them (else the navigator's table)."""
-    import json
-
-    from modelgen.navigator.report import FIGURE_CAPTIONS
-
-    try:
-        return dict(json.loads((folder / "summary.json").read_text(encoding="utf-8")).get("figures") or FIGURE_CAPTIONS)
-    except (OSError, ValueError):
-        return dict(FIGURE_CAPTIONS)
 
 
 def derived_export(model: str | Path, fmt: str, name: str | None = None) -> str:
