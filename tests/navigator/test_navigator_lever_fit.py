@@ -3,7 +3,9 @@ navigator's NHC rows use, and states a standard error that counts the time corre
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -78,3 +80,24 @@ def test_the_standard_error_counts_the_correlation_of_the_errors():
 def test_the_design_has_one_column_per_unknown_and_two_rows_per_step():
     A = design(np.zeros((5, 3)), np.ones(5))
     assert A.shape == (10, len(UNKNOWNS))
+
+
+RESULTS = Path(__file__).parents[2] / "bench" / "results"
+
+
+@pytest.mark.parametrize("config_name", ["replay_drive_0708.yaml", "replay_drive_0708_21.yaml"])
+def test_the_shipped_configurations_hold_stage_10_s_lever_arm_and_rate_limit(config_name):
+    """nhc.lever_arm_m is the fit's components above 3 Newey-West sigma (bench/navigator_tuning.py --lever-arm, its
+    result committed in bench/results), each configuration its own model's; nhc.rate_max_deg_s is what stage 3's
+    rule picks with that lever arm; the tuning: record names both."""
+    from modelgen.navigator.config import DEG, builtin_config_path, load_config
+
+    config = load_config(builtin_config_path().parent / config_name)
+    (result,) = [r for r in json.loads((RESULTS / "navigator_tuning_stage10_lever_arm.json").read_text())["results"]
+                 if r["configuration"] == config_name]
+    assert result["model"] == config.model
+    for name, chosen, held in zip(("l_x", "l_y", "l_z"), result["chosen_lever_arm_m"], config.nhc_lever_arm):
+        significant = result["fit"]["significance"][name] > 3.0
+        assert held == (pytest.approx(round(result["fit"]["estimate"][name], 2)) if significant else 0.0) == chosen
+    assert config.nhc_rate_max == pytest.approx(result["rate_limit_choice"][str(result["chosen_lever_arm_m"])] * DEG)
+    assert {"nhc.lever_arm_m", "nhc.rate_max_deg_s"} <= set(config.tuning)
