@@ -142,7 +142,10 @@ The method and the decisions, written before the fit was run:
    stage 3's numbers, 7.1 / 6.4 / 6.2 / 6.1, it gives stage 3's 10 deg/s); the grid is also flown without the lever
    arm, beside it; and the innovations' white log-likelihood with GNSS present (every sensor, the configured
    noise; :func:`modelgen.navigator.likelihood.log_likelihood`) at no lever arm and at the chosen one, stated
-   (added after the first run, as information, not a decision: with each chosen component alone too).
+   (added after the first run, as information, not a decision: with each chosen component alone too);
+4. then (for 15 states; issue 26 item 5) stage 7 again with the lever arm and the rate limit in the configuration
+   (``--fixed-point CONFIG --both-starts``, the selector as written) and its point shipped if it moves the numbers
+   (bench/results/navigator_tuning_stage10_fixed_point_15*, navigator_tuning_stage10_selector.*).
 
 Stage 8 (``--select [STAGE7_JSON ...] [--json FILE]``): step 5's selection on stage 7's committed fixed points
 (default: bench/results/navigator_tuning_stage7_both_starts_{15,15_white,21,21_white}.json), without running the
