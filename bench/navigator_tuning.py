@@ -120,6 +120,33 @@ The method and the decision, written before any outage was flown with its result
    R_vel x 9.20, NHC 0.0409 / 0.0447 m/s, ZUPT 0.150 m/s, factor 36.7; 21 states R_pos x 15.9, R_vel x 4.86,
    NHC 0.0414 / 0.0449 m/s, ZUPT 0.227 m/s, factor 34.1.
 
+Stage 10 (``--lever-arm [CONFIG ...] [--json FILE]``, issue 26): where the non-holonomic constraint holds.  The
+constraint was applied at the IMU (no lever arm) and only below 10 deg/s of angular rate, because the rear axle's
+distance from the IMU was not known; with a forward offset x the IMU's true lateral velocity is about omega_z x.
+The method and the decisions, written before the fit was run:
+
+1. fit: each configuration flown with GNSS present everywhere (the Python navigator, no outage flown, no outage
+   error computed), the NHC tried at every covariance step above nhc.speed_min_m_s whatever the rate (rate limit
+   off) with no lever arm and a sigma of :data:`LEVER_PROBE_SIGMA` (its updates then move nothing: the body
+   velocity is the GNSS/INS solution's own); its recorded innovations are the IMU's body lateral and vertical
+   velocity, and with the bias-corrected gyro rate of the same sample they give the lever arm l (IMU to the
+   constrained point) by least squares (:func:`modelgen.navigator.lever_fit.fit`: v_y = omega_x l_z - omega_z l_x,
+   v_z = omega_y l_x - omega_x l_y, from v_point = v_imu + omega x l = 0 laterally and vertically, with a speed
+   term and a constant per row for a residual boresight misalignment), the Newey-West standard error over 5 s;
+   the same fit on each half of the drive (residential streets, parking lot) as a check that l is one constant;
+2. decision: a component is set in nhc.lever_arm_m if it is significant (|estimate| > 3 Newey-West standard
+   errors) and physically plausible (within 5 m: a car's rear axle from a roof or console IMU), else it stays 0;
+3. then nhc.rate_max_deg_s again by stage 3's criterion (the C navigator, GNSS everywhere, the configured gate:
+   median GNSS NIS over the grid 1e9 (no limit) / 20 / 10 / 5 deg/s), the rule made explicit: the largest limit
+   (the most NHC updates) whose median GNSS NIS is within :data:`RATE_LIMIT_NIS_MARGIN` of the grid's lowest (on
+   stage 3's numbers, 7.1 / 6.4 / 6.2 / 6.1, it gives stage 3's 10 deg/s); the grid is also flown without the lever
+   arm, beside it; and the innovations' white log-likelihood with GNSS present (every sensor, the configured
+   noise; :func:`modelgen.navigator.likelihood.log_likelihood`) at no lever arm and at the chosen one, stated
+   (added after the first run, as information, not a decision: with each chosen component alone too);
+4. then (for 15 states; issue 26 item 5) stage 7 again with the lever arm and the rate limit in the configuration
+   (``--fixed-point CONFIG --both-starts``, the selector as written) and its point shipped if it moves the numbers
+   (bench/results/navigator_tuning_stage10_fixed_point_15*, navigator_tuning_stage10_selector.*).
+
 Stage 8 (``--select [STAGE7_JSON ...] [--json FILE]``): step 5's selection on stage 7's committed fixed points
 (default: bench/results/navigator_tuning_stage7_both_starts_{15,15_white,21,21_white}.json), without running the
 iteration again: one GNSS-present flight per point.
@@ -140,6 +167,7 @@ modelgen/data/replay_drive_0708.yaml by hand (with this script named there).
     python bench/navigator_tuning.py --markov-check [STAGE6_JSON] [--json FILE]   # stage 6b (a few minutes)
     python bench/navigator_tuning.py --fixed-point [CONFIG] [--both-starts] [--json FILE]   # stage 7 (both: about a quarter of an hour)
     python bench/navigator_tuning.py --select [STAGE7_JSON ...] [--json FILE]   # stage 8 (a few minutes)
+    python bench/navigator_tuning.py --lever-arm [CONFIG ...] [--json FILE]   # stage 10 (a few minutes)
 """
 
 from __future__ import annotations
@@ -169,6 +197,15 @@ FIXED_POINT_ITERATIONS = 8
 #: stage 7's bounded search: half-width of the interval in log10 of the white-noise factor, and its tolerance
 FIXED_POINT_HALF_WIDTH = 0.25
 FIXED_POINT_XATOL = 0.004
+#: stage 10: the NHC sigma of the fit's flight [m/s] (its updates move nothing), the Newey-West window [s], the
+#: significance and the largest plausible lever arm component [m], the rate-limit grid [deg/s; 1e9: none] and the
+#: relative margin on the median GNSS NIS within which the largest limit is taken
+LEVER_PROBE_SIGMA = 1000.0
+LEVER_NEWEY_WEST_S = 5.0
+LEVER_SIGNIFICANCE = 3.0
+LEVER_PLAUSIBLE_M = 5.0
+RATE_LIMITS_DEG_S = (1e9, 20.0, 10.0, 5.0)
+RATE_LIMIT_NIS_MARGIN = 0.02
 
 
 def _flight(args: tuple[float, float, float, str]) -> tuple[float, float, float, float, float]:
@@ -742,6 +779,153 @@ def select(arguments: list[str]) -> None:
         print(f"written {out_json}")
 
 
+def _lever_arm_data(config_file: str) -> dict:
+    """Stage 10, step 1's data: the IMU's body lateral and vertical velocity, the bias-corrected body rate and the
+    speed at every covariance step of a GNSS-present flight with the NHC on at no lever arm and a sigma so large it
+    moves nothing (module docstring)."""
+    from modelgen.navigator import tuning
+    from modelgen.navigator.config import load_config
+    from modelgen.navigator.errorstate import model_path
+    from modelgen.navigator.logs import read_gnss, read_imu
+    from modelgen.navigator.metrics import COLUMN
+    from modelgen.navigator.navigator import prepare
+    from modelgen.navigator.spec import navigator_spec
+
+    shipped = load_config(config_file)
+    inputs = prepare(shipped, read_imu(shipped.imu_source, shipped.gap_factor, shipped.gap_action),
+                     read_gnss(shipped.gnss_source))
+    spec = navigator_spec(model_path(shipped.model, shipped.path))
+    probe = dataclasses.replace(shipped, nhc_enabled=True, nhc_lever_arm=(0.0, 0.0, 0.0), nhc_rate_max=1e9,
+                                nhc_sigma_lateral=LEVER_PROBE_SIGMA, nhc_sigma_vertical=LEVER_PROBE_SIGMA)
+    sources, flight = tuning.record_innovations(probe, inputs, spec)
+    nhc = sources["nhc"]
+    t = np.array(nhc.time)
+    k = np.searchsorted(inputs.time, t)
+    assert np.array_equal(inputs.time[k], t), "an NHC update off an IMU sample"
+    out = flight.outputs
+
+    def at(names: list[str]) -> np.ndarray:
+        return np.column_stack([np.interp(t, out[:, COLUMN["time"]], out[:, COLUMN[n]]) for n in names])
+
+    bias = at([f"gyro_bias_{a}" for a in "xyz"])
+    scale = at([f"gyro_scale_factor_{a}" for a in "xyz"])
+    speed = np.linalg.norm(at(["v_north", "v_east", "v_down"]), axis=1)
+    period = tuning.update_period(t)
+    return {"configuration": Path(str(shipped.path)).name, "model": spec.name, "time": t,
+            "v_body": np.array(nhc.nu), "rate": (inputs.rate[k] - bias) / (1.0 + scale), "speed": speed,
+            "period_s": period, "lags": int(round(LEVER_NEWEY_WEST_S / period)),
+            "nis_median_gnss": float(np.median(flight.gnss_nis))}
+
+
+def _fit_dict(result) -> dict:
+    """A lever_fit.LeverArmFit as JSON."""
+    return {**dataclasses.asdict(result), "significance": {k: result.significance(k) for k in result.estimate}}
+
+
+def _format_fit(title: str, result) -> list[str]:
+    from modelgen.navigator.lever_fit import UNITS, UNKNOWNS
+
+    lines = [f"  {title}: {result.samples} steps, Newey-West over {result.lags} steps; RMS lateral "
+             f"{result.raw_rms['lateral']:.4f} -> {result.residual_rms['lateral']:.4f} m/s, vertical "
+             f"{result.raw_rms['vertical']:.4f} -> {result.residual_rms['vertical']:.4f} m/s"]
+    for name, unit in zip(UNKNOWNS, UNITS):
+        lines.append(f"    {name:19} {result.estimate[name]:+9.4f} {unit:4} +- {result.standard_error[name]:.4f} "
+                     f"(OLS {result.ols_standard_error[name]:.4f}; {result.significance(name):6.1f} sigma)")
+    return lines
+
+
+def _rate_limit_grid(config, inputs, navigator) -> list[dict]:
+    """Stage 3's flights (C navigator, GNSS everywhere) over the rate-limit grid at the configuration's lever arm."""
+    from modelgen.navigator.cnav import fly_c
+    from modelgen.navigator.config import DEG
+    from modelgen.navigator.metrics import errors_against_reference, summary
+
+    rows = []
+    for rate in RATE_LIMITS_DEG_S:
+        flown = dataclasses.replace(config, outage_schedule=None, outage_windows=None, nhc_rate_max=rate * DEG)
+        flight, _ = fly_c(flown, inputs, navigator)
+        s = summary(flight, errors_against_reference(flight, inputs.gnss), inputs.gnss)
+        rows.append({"rate_max_deg_s": rate, "gnss_nis_median": s["gnss_nis_median"],
+                     "horizontal_rms_vs_receiver_m": s["horizontal_rms_outside_outages_m"],
+                     "gnss_deweighted": s["counts"]["gnss_deweighted"], "nhc_updates": s["counts"]["nhc_updates"]})
+    return rows
+
+
+def rate_limit_choice(rows: list[dict]) -> float:
+    """Stage 10 step 3's rule: the largest limit whose median GNSS NIS is within the margin of the grid's lowest."""
+    lowest = min(r["gnss_nis_median"] for r in rows)
+    return max(r["rate_max_deg_s"] for r in rows if r["gnss_nis_median"] <= lowest * (1.0 + RATE_LIMIT_NIS_MARGIN))
+
+
+def lever_arm(arguments: list[str]) -> None:
+    """Stage 10 (module docstring): the NHC lever arm from GNSS-present data, then the rate limit again."""
+    import json
+
+    from modelgen.fileio.datafiles import package_path
+    from modelgen.navigator import lever_fit
+    from modelgen.navigator import likelihood as ml
+    from modelgen.navigator import tuning
+    from modelgen.navigator.cnav import cached_c_navigator
+    from modelgen.navigator.config import load_config
+    from modelgen.navigator.errorstate import model_path
+    from modelgen.navigator.logs import read_gnss, read_imu
+    from modelgen.navigator.navigator import prepare
+    from modelgen.navigator.spec import navigator_spec
+
+    out_json, arguments = _json_option(arguments)
+    files = arguments or [str(package_path("data", "replay_drive_0708.yaml")),
+                          str(package_path("data", "replay_drive_0708_21.yaml"))]
+    with ProcessPoolExecutor(min(2, len(files))) as pool:
+        data = list(pool.map(_lever_arm_data, files))
+    results = []
+    for f, d in zip(files, data):
+        whole = lever_fit.fit(d["v_body"], d["rate"], d["speed"], d["lags"])
+        middle = 0.5 * (d["time"][0] + d["time"][-1])
+        halves = {}
+        for name, part in (("first half", d["time"] < middle), ("second half", d["time"] >= middle)):
+            halves[name] = lever_fit.fit(d["v_body"][part], d["rate"][part], d["speed"][part], d["lags"])
+        chosen = tuple(round(v, 2) if whole.significance(k) > LEVER_SIGNIFICANCE and abs(v) <= LEVER_PLAUSIBLE_M
+                       else 0.0 for k, v in zip(("l_x", "l_y", "l_z"), whole.lever_arm))
+        print(f"stage 10: {d['configuration']} ({d['model']}), GNSS present everywhere, no outage flown; NHC at no "
+              f"lever arm, sigma {LEVER_PROBE_SIGMA:g} m/s, no rate limit (median GNSS NIS {d['nis_median_gnss']:.2f})")
+        print("\n".join(_format_fit("whole drive", whole)))
+        for name, part in halves.items():
+            print("\n".join(_format_fit(name, part)))
+        print(f"  -> nhc.lever_arm_m {list(chosen)} (a component where it is above {LEVER_SIGNIFICANCE:g} sigma and "
+              f"within {LEVER_PLAUSIBLE_M:g} m, else 0)")
+        shipped = load_config(f)
+        inputs = prepare(shipped, read_imu(shipped.imu_source, shipped.gap_factor, shipped.gap_action),
+                         read_gnss(shipped.gnss_source))
+        navigator, _ = cached_c_navigator(navigator_spec(model_path(shipped.model, shipped.path), with_python=False))
+        arms = ((0.0, 0.0, 0.0), chosen)
+        grids = {str(list(arm)): _rate_limit_grid(dataclasses.replace(shipped, nhc_lever_arm=arm), inputs, navigator)
+                 for arm in arms}
+        spec = navigator_spec(model_path(shipped.model, shipped.path))
+        alone = tuple(tuple(v if i == j else 0.0 for j, v in enumerate(chosen)) for i in range(3) if chosen[i])
+        likelihoods = {str(list(arm)): ml.log_likelihood(tuning.record_innovations(
+            dataclasses.replace(shipped, nhc_lever_arm=arm), inputs, spec)[0])
+            for arm in dict.fromkeys(arms + (alone if len(alone) > 1 else ()))}
+        print("  innovations' log L with GNSS present (configured noise and rate limit): " + "; ".join(
+            f"{arm} {v['total']:.1f} (" + ", ".join(f"{k} {x:.1f}" for k, x in v.items() if k != "total") + ")"
+            for arm, v in likelihoods.items()), flush=True)
+        print("  rate limit, C navigator, GNSS everywhere (stage 3's flights):")
+        print("  lever arm             rate limit  median NIS  RMS vs receiver [m]  de-weighted  NHC updates")
+        for arm, rows in grids.items():
+            for r in rows:
+                limit = "none" if r["rate_max_deg_s"] > 1e8 else f"{r['rate_max_deg_s']:g} deg/s"
+                print(f"  {arm:20}  {limit:>10}  {r['gnss_nis_median']:10.3f}  {r['horizontal_rms_vs_receiver_m']:19.4f}"
+                      f"  {r['gnss_deweighted']:11d}  {r['nhc_updates']:11d}")
+            print(f"  {arm}: the rule picks {rate_limit_choice(rows):g} deg/s")
+        results.append({"configuration": d["configuration"], "model": d["model"], "period_s": d["period_s"],
+                         "probe_sigma_m_s": LEVER_PROBE_SIGMA, "fit": _fit_dict(whole),
+                         "halves": {k: _fit_dict(v) for k, v in halves.items()}, "chosen_lever_arm_m": list(chosen),
+                         "rate_limit_grid": grids, "log_likelihood": likelihoods,
+                         "rate_limit_choice": {arm: rate_limit_choice(rows) for arm, rows in grids.items()}})
+    if out_json:
+        Path(out_json).write_text(json.dumps({"stage": 10, "results": results}, indent=2, default=float) + "\n")
+        print(f"written {out_json}")
+
+
 if __name__ == "__main__":
     if sys.argv[1:] == ["--stage3"]:
         stage3()
@@ -757,5 +941,7 @@ if __name__ == "__main__":
         fixed_point(sys.argv[2:])
     elif sys.argv[1:2] == ["--select"]:
         select(sys.argv[2:])
+    elif sys.argv[1:2] == ["--lever-arm"]:
+        lever_arm(sys.argv[2:])
     else:
         main()

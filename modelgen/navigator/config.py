@@ -109,6 +109,8 @@ class NavigatorConfig:
     imu_source: LogSource | None = None  # the imu: section as the log readers take it (format, file, options)
     gnss_source: LogSource | None = None
     gap_action: str = "refuse"  # imu.gap_action: refuse a log with an IMU gap, or propagate across it
+    #: nhc.lever_arm_m: IMU to the point the constraint holds at (the rear axle's centre on the ground), body axes [m]
+    nhc_lever_arm: tuple[float, float, float] = (0.0, 0.0, 0.0)
     #: the alignment's still detector and shortest usable rest window (modelgen.navigator.alignment)
     still_window: float = 0.5  # alignment.still_window_s [s]
     still_gyro_std_max: float = 1.0 * DEG  # alignment.gyro_std_max_deg_s [rad/s]
@@ -245,6 +247,12 @@ class _Reader:
                 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)):
             raise ModelError(f"{self.where(key)}: {key} must be a list of {length} finite numbers, got {value!r}")
         return tuple(float(v) for v in value)
+
+    def lever_arm(self, key: str) -> tuple[float, float, float]:
+        """A lever arm (3 finite numbers, body axes [m]) at a key path; (0, 0, 0) when absent: no lever-arm term."""
+        if self.get(key, None) is None:
+            return (0.0, 0.0, 0.0)
+        return self.vector(key, 3)  # type: ignore[return-value]
 
     def folder(self, key: str) -> Path:
         """The folder relative paths at ``key`` start from: that of the file that wrote it (a base's, if inherited)."""
@@ -466,6 +474,7 @@ def load_config(path: str | Path) -> NavigatorConfig:
         nhc_sigma_vertical=r.number("nhc.sigma_vertical_m_s", positive=True),
         nhc_speed_min=r.number("nhc.speed_min_m_s", non_negative=True),
         nhc_rate_max=r.number("nhc.rate_max_deg_s", 1e9, positive=True) * DEG,
+        nhc_lever_arm=r.lever_arm("nhc.lever_arm_m"),
         outage_schedule=schedule, outage_windows=windows,
         imu_source=imu_source, gnss_source=gnss_source, gap_action=gap_action, **_evaluation(r),
         gyro_scale_factor_sigma=_ppm(r, "initial.gyro_scale_factor_sigma_ppm"),
@@ -512,10 +521,7 @@ def _aiding(reader: _Reader, section: str) -> AidingSettings:
     if columns[0] == columns[1]:
         raise ModelError(f"{reader.where(section + '.columns')}: {section}.columns: time and value are both "
                          f"column {columns[0]}")
-    lever = None
-    if has_lever_arm:
-        lever = reader.vector(f"{section}.lever_arm_m", 3) if reader.get(f"{section}.lever_arm_m", None) is not None \
-            else (0.0, 0.0, 0.0)
+    lever = reader.lever_arm(f"{section}.lever_arm_m") if has_lever_arm else None
     sigma = reader.number(f"{section}.{sigma_key}", positive=True) if reader.get(f"{section}.{sigma_key}", None) \
         is not None else 1.0
     return AidingSettings(section, enabled, file, columns[0], columns[1], unit,

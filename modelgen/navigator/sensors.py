@@ -110,7 +110,7 @@ def _zupt_values(config) -> dict:
 def _nhc_values(config) -> dict:
     return {"nhc_enabled": int(config.nhc_enabled), "nhc_speed_min": config.nhc_speed_min,
             "nhc_sigma_lateral": config.nhc_sigma_lateral, "nhc_sigma_vertical": config.nhc_sigma_vertical,
-            "nhc_rate_max": config.nhc_rate_max}
+            "nhc_rate_max": config.nhc_rate_max, "nhc_lever_arm": list(config.nhc_lever_arm)}
 
 
 #: GNSS is updated at its epochs (fly()'s epoch loop, the C's navigator_epoch), with the gate release and de-weighting
@@ -128,13 +128,16 @@ ZUPT = AidingSensor(
 NHC = AidingSensor(
     "nhc", "nhc", "imu", "body_velocity", ("cfg->nhc_sigma_lateral", "cfg->nhc_sigma_vertical"),
     "speed > cfg->nhc_speed_min && rate_norm < cfg->nhc_rate_max", "nhc_enabled",
-    "non-holonomic constraint: no lateral or vertical body velocity", axes=(1, 2), group="motion",
+    "non-holonomic constraint: no lateral or vertical body velocity at the constrained point (nhc.lever_arm_m)",
+    axes=(1, 2), lever_arm="nhc_lever_arm", group="motion",
     fields=(Field("nhc_enabled", "int", 1, "non-holonomic constraint on (1) or off (0)", key="nhc.enabled"),
             Field("nhc_speed_min", "double", 1, "NHC only above this speed [m/s]", key="nhc.speed_min_m_s"),
             Field("nhc_sigma_lateral", "double", 1, "NHC lateral sigma [m/s]", key="nhc.sigma_lateral_m_s"),
             Field("nhc_sigma_vertical", "double", 1, "NHC vertical sigma [m/s]", key="nhc.sigma_vertical_m_s"),
             Field("nhc_rate_max", "double", 1, "NHC only below this bias-corrected angular rate [rad/s]",
-                  key="nhc.rate_max_deg_s", scale=DEG)),
+                  key="nhc.rate_max_deg_s", scale=DEG),
+            Field("nhc_lever_arm", "double", 3, "IMU to the point the NHC holds at (rear axle centre) in body axes [m]",
+                  key="nhc.lever_arm_m")),
     values=_nhc_values)
 ODOMETER = AidingSensor(
     "odometer", "odometer", "odometer", "body_velocity", ("cfg->odometer_sigma",), "fresh", "odometer_enabled",

@@ -95,7 +95,7 @@ def test_the_search_finds_the_process_and_measurement_noise_of_a_simulated_rando
 
 
 @pytest.mark.parametrize("config_name, result_name", [
-    ("replay_drive_0708.yaml", "navigator_tuning_stage9_fixed_point_15_white.json"),
+    ("replay_drive_0708.yaml", "navigator_tuning_stage10_fixed_point_15.json"),
     ("replay_drive_0708_21.yaml", "navigator_tuning_stage9_fixed_point_21_white.json")])
 def test_the_shipped_configurations_hold_the_maximum_likelihood_estimate_at_the_fixed_point(config_name, result_name):
     """The white-noise factor stage 5 estimated in the last iteration of stages 4 and 5 to a fixed point

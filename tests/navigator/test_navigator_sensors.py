@@ -22,7 +22,7 @@ from modelgen.navigator import cconfig
 from modelgen.navigator.config import AidingSettings, load_config
 from modelgen.navigator.logs import ScalarLog, read_gnss
 from modelgen.navigator.metrics import COLUMN, errors_against_reference
-from modelgen.navigator.sensors import FORMS, SENSORS, AidingSensor, compiled_condition, stream_values
+from modelgen.navigator.sensors import FORMS, NHC, SENSORS, AidingSensor, compiled_condition, rows, stream_values
 from modelgen.navigator.cconfig_fields import Field
 from tests.navigator.qemu_support import needs_qemu_arm
 
@@ -30,6 +30,8 @@ pytestmark = pytest.mark.flight
 
 DATA = Path(__file__).parent / "data"
 ODOMETER_SIGMA_M_S, BAROMETER_SIGMA_M = 0.05, 0.3
+#: IMU to a rear axle 1.2 m behind it and 0.5 m below it (body x forward, y right, z down) [m]
+NHC_LEVER_ARM_M = (-1.2, 0.0, 0.5)
 
 
 def test_the_table_has_one_entry_per_aiding_sensor():
@@ -92,12 +94,13 @@ def aided(tmp_path_factory):
                              "columns": {"time": 1, "value": 2}, "sigma_m_s": ODOMETER_SIGMA_M_S,
                              "lever_arm_m": [-1.2, 0.0, 0.5]}}
     barometer = {"barometer": {"enabled": True, "file": str(folder / "barometer.csv"), "sigma_m": BAROMETER_SIGMA_M}}
+    nhc = {"nhc": {**yaml.safe_load((DATA / "excerpt.yaml").read_text())["nhc"], "lever_arm_m": list(NHC_LEVER_ARM_M)}}
     # the barometer is flown through one 40-s outage: over the excerpt's 15-s outage the height drifts 0.16 m
     # (NHC holds the vertical velocity), less than the barometer's own noise
     long = {"outages": {"windows": [[14.0, 40.0]]}}
     runs = {}
     for name, extra in (("none", {}), ("odometer", odometer), ("none_long", long),
-                        ("barometer", {**long, **barometer})):
+                        ("barometer", {**long, **barometer}), ("nhc_lever_arm", nhc)):
         (folder / name).mkdir()
         runs[name] = run_replay(_config_with(folder / name, extra), None, echo=lambda _: None, navigator="both")
     return runs, gnss
@@ -142,6 +145,51 @@ def test_gnss_zupt_nhc_alone_fly_as_before_the_table(aided):
     s = runs["none"].summary
     assert s["counts"]["gnss_updates"] == 240 - 60 - 55 and s["counts"]["nhc_updates"] == 552
     assert s["c_python_max_difference_m"] <= 1e-3
+
+
+def _turn(heading: float, yaw_rate: float, speed: float, lever: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A car turning at a constant yaw rate, its rear axle (at ``lever`` from the IMU) rolling forward at ``speed``:
+    the IMU's attitude C_b^n, NED velocity and body rate (v_imu = v_axle - omega x l)."""
+    c, s = math.cos(heading), math.sin(heading)
+    c_bn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    rate = np.array([0.0, 0.0, yaw_rate])
+    v_body = np.array([speed, 0.0, 0.0]) - np.cross(rate, lever)
+    return c_bn, c_bn @ v_body, rate
+
+
+def test_nhc_with_the_rear_axle_s_lever_arm_has_zero_innovation_in_a_constant_rate_turn():
+    """At 0.3 rad/s the IMU 1.2 m ahead of the axle slides 0.36 m/s sideways: the constraint at the IMU sees that
+    as an innovation, the constraint at the axle (nhc.lever_arm_m) sees none."""
+    from modelgen.navigator.errorstate import model_path
+    from modelgen.navigator.spec import navigator_spec
+
+    spec = navigator_spec(model_path("ins_gps15_nav", DATA / "excerpt.yaml"))
+    lever = np.array(NHC_LEVER_ARM_M)
+    at_axle, at_imu = (cconfig.namespace({"nhc_lever_arm": list(arm)}) for arm in (lever, np.zeros(3)))
+    for heading in np.linspace(0.0, 2.0 * math.pi, 7):
+        c_bn, v_ned, rate = _turn(heading, 0.3, 8.0, lever)
+        nav = np.r_[np.zeros(4), v_ned, np.zeros(3)]
+        z_axle, H_axle = rows(NHC, spec, nav, c_bn, rate, 0.0, at_axle)
+        z_imu, H_imu = rows(NHC, spec, nav, c_bn, rate, 0.0, at_imu)
+        assert np.abs(z_axle).max() < 1e-12
+        assert z_imu == pytest.approx([0.3 * 1.2, 0.0], abs=1e-12)
+        assert np.array_equal(H_axle, H_imu)  # the lever-arm term is in z only (its gyro-bias error is neglected)
+
+
+def test_the_nhc_lever_arm_is_flown_by_c_and_python_alike(aided):
+    """nhc.lever_arm_m reaches both navigators (they agree) and changes the flight against the constraint at the IMU."""
+    runs, _ = aided
+    with_arm, without = runs["nhc_lever_arm"], runs["none"]
+    assert with_arm.summary["c_python_max_difference_m"] <= 1e-3
+    velocity = [COLUMN["v_north"], COLUMN["v_east"]]
+    moved = np.abs(with_arm.flight.outputs[:, velocity] - without.flight.outputs[:, velocity]).max()
+    assert moved > 1e-3  # [m/s]
+
+
+def test_a_configuration_without_nhc_lever_arm_constrains_the_imu():
+    config, _ = _reference()
+    assert config.nhc_lever_arm == (0.0, 0.0, 0.0)
+    assert cconfig.namespace(NHC.values(config)).nhc_lever_arm.tolist() == [0.0, 0.0, 0.0]
 
 
 def test_a_new_sensor_is_one_table_entry(tmp_path):

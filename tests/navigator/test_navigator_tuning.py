@@ -134,7 +134,7 @@ CONFIG_FIELDS = {"gnss.position_variance_factor": "gnss_position_variance_factor
 
 
 @pytest.mark.parametrize("config_name, result_name", [
-    ("replay_drive_0708.yaml", "navigator_tuning_stage9_fixed_point_15_white.json"),
+    ("replay_drive_0708.yaml", "navigator_tuning_stage10_fixed_point_15.json"),
     ("replay_drive_0708_21.yaml", "navigator_tuning_stage9_fixed_point_21_white.json")])
 def test_the_shipped_configurations_hold_the_fixed_point_of_stages_4_and_5(config_name, result_name):
     """Every number stages 4 and 5 set, iterated to their fixed point (bench/navigator_tuning.py --fixed-point
@@ -186,25 +186,28 @@ def test_the_summary_states_the_pooled_nees_it_flew_not_a_figure_of_another_conf
     assert _overconfidence_lines({"schedules": [], "consistency_pooled": {}}) == []
 
 
-@pytest.mark.parametrize("states, config_name", [(15, "replay_drive_0708.yaml"), (21, "replay_drive_0708_21.yaml")])
-def test_of_the_fixed_points_from_both_starts_the_shipped_one_has_the_higher_thinned_log_likelihood(states, config_name):
+@pytest.mark.parametrize("stage, states, config_name", [(10, 15, "replay_drive_0708.yaml"),
+                                                        (9, 21, "replay_drive_0708_21.yaml")])
+def test_of_the_fixed_points_from_both_starts_the_shipped_one_has_the_higher_thinned_log_likelihood(stage, states,
+                                                                                                    config_name):
     """Stage 7's step 5 (bench/navigator_tuning.py --fixed-point --both-starts, run again as stage 9 after stage 4
-    was made to pair every update; --select on the committed fixed points): of the converged fixed points, from
+    was made to pair every update, and for 15 states as stage 10 with the NHC lever arm; --select on the committed
+    fixed points): of the converged fixed points, from
     the shipped and from the white start, the configuration holds the one whose innovations' thinned composite
     log-likelihood with GNSS present is higher (likelihood.thinned_log_likelihood: a choice the innovations make,
-    not the outages).  The selection scored exactly stage 9's points, and its flights reproduce their white
+    not the outages).  The selection scored exactly that stage's points, and its flights reproduce their white
     log-likelihoods (stated beside, not used)."""
     import json
 
     from modelgen.navigator import likelihood
     from modelgen.navigator.config import builtin_config_path, load_config
 
-    runs = [json.loads((STAGE4_RESULTS / f"navigator_tuning_stage9_fixed_point_{states}{suffix}.json").read_text())
+    runs = [json.loads((STAGE4_RESULTS / f"navigator_tuning_stage{stage}_fixed_point_{states}{suffix}.json").read_text())
             for suffix in ("", "_white")]
     assert [r["start"] for r in runs] == ["shipped", "white"] and all(r["converged"] for r in runs)
     assert all(r["configuration"] == config_name for r in runs)
-    stage9 = json.loads((STAGE4_RESULTS / "navigator_tuning_stage9_selector.json").read_text())
-    (selection,) = [s for s in stage9["selections"] if s["configuration"] == config_name]
+    selector = json.loads((STAGE4_RESULTS / f"navigator_tuning_stage{stage}_selector.json").read_text())
+    (selection,) = [s for s in selector["selections"] if s["configuration"] == config_name]
     assert selection["points"] == {r["start"]: r["fixed_point"] for r in runs}
     for r in runs:
         assert selection["white_log_likelihood"][r["start"]]["total"] == pytest.approx(r["log_likelihood"]["total"],
