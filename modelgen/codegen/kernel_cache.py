@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import sys
 import types
 from pathlib import Path
 from typing import Any
@@ -63,13 +64,32 @@ def kernel_source(folder: Path, text: bytes) -> Path:
     return path
 
 
-def as_if_from(function: types.FunctionType, source: Path) -> types.FunctionType:
-    """``function`` with its code marked as coming from ``source`` (same code, globals, defaults and closure)."""
+def as_if_from(function: types.FunctionType, source: Path, globals_: dict) -> types.FunctionType:
+    """``function`` with its code marked as coming from ``source`` and ``globals_`` as its globals (same code,
+    defaults and closure)."""
     code = function.__code__.replace(co_filename=str(source))
-    moved = types.FunctionType(code, function.__globals__, function.__name__, function.__defaults__,
-                               function.__closure__)
-    moved.__qualname__, moved.__module__, moved.__doc__ = function.__qualname__, function.__module__, function.__doc__
+    moved = types.FunctionType(code, globals_, function.__name__, function.__defaults__, function.__closure__)
+    moved.__qualname__, moved.__module__, moved.__doc__ = function.__qualname__, globals_["__name__"], function.__doc__
     return moved
+
+
+def text_module(function: types.FunctionType, text: bytes) -> types.ModuleType:
+    """A module of the same globals as ``function``'s, named ``modelgen_kernel_<sha256 of text>`` in every process.
+
+    numba's cached code names its function's module (its globals'
+    ``__name__``) and imports it by that name when it loads the code; a
+    generated module's own name depends on its path
+    (modelgen.codegen.build.load_python_module), which another process does
+    not share.  The copy of the globals is registered under the text's name
+    (the first module of that text in this process); the kernel reads its
+    globals only when numba compiles it, which freezes them.
+    """
+    name = f"modelgen_kernel_{hashlib.sha256(text).hexdigest()}"
+    if name not in sys.modules:
+        module = types.ModuleType(name)
+        module.__dict__.update({k: v for k, v in function.__globals__.items() if k != "__name__"})
+        sys.modules[name] = module
+    return sys.modules[name]
 
 
 def disk_cached_kernel(kernel: Any, text: bytes) -> Any:
@@ -87,6 +107,7 @@ def disk_cached_kernel(kernel: Any, text: bytes) -> Any:
 
     try:
         source = kernel_source(folder, text)
-        return numba.jit(cache=True, **kernel.targetoptions)(as_if_from(kernel.py_func, source))
+        function = as_if_from(kernel.py_func, source, text_module(kernel.py_func, text).__dict__)
+        return numba.jit(cache=True, **kernel.targetoptions)(function)
     except (OSError, ModelError, RuntimeError):  # ModelError: not a regular file; RuntimeError: numba found no folder
         return kernel

@@ -1,8 +1,8 @@
 """The disk cache of the generated modules' compiled predict kernels (modelgen.codegen.kernel_cache).
 
 With $MODELGEN_KERNEL_CACHE_DIR set, a kernel one process compiled is loaded
-from disk by the next one (here: the same process with its in-memory kernels
-forgotten) and computes the same numbers; the cache is keyed by the module's
+from disk by another process, which loads the module from another path, and
+computes the same numbers; the cache is keyed by the module's
 exact text; unset, nothing is written; a relative folder is refused and a
 folder that cannot be written leaves the kernel compiled in memory.
 """
@@ -10,6 +10,9 @@ folder that cannot be written leaves the kernel compiled in memory.
 from __future__ import annotations
 
 import hashlib
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +24,8 @@ from modelgen.errors import ModelError
 from tests.codegen.test_python_filter_class import arguments, py  # noqa: F401 (fixtures)
 
 pytest.importorskip("numba")
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 def fresh_load(text: str, folder: Path, monkeypatch):
@@ -37,7 +42,23 @@ def predicted(module, a):
     return x, P
 
 
-def test_a_kernel_compiled_by_one_process_is_loaded_from_disk_by_the_next_with_the_same_numbers(
+#: Run in a fresh process: load the module at argv[1], call its kernel on the arrays saved in argv[2], save the
+#: result beside them and print numba's cache hits and misses of that call.
+OTHER_PROCESS = """
+import sys
+import numpy as np
+from modelgen.codegen.build import load_python_module
+module = load_python_module(sys.argv[1])
+a = np.load(sys.argv[2])
+x, P = np.empty(18), np.empty((18, 18))
+assert module._compiled_predict(a["x"], a["P"], a["Phi"], a["Qd"], x, P, True)
+np.savez(sys.argv[3], x=x, P=P)
+stats = module._compiled_predict.stats
+print(sum(stats.cache_hits.values()), sum(stats.cache_misses.values()))
+"""
+
+
+def test_a_kernel_compiled_by_one_process_is_loaded_from_disk_by_another_with_the_same_numbers(
         py, arguments, tmp_path, monkeypatch):  # noqa: F811
     monkeypatch.setenv(KERNEL_CACHE_ENV, str(tmp_path / "kernels"))
     text = Path(py.__file__).read_text()
@@ -45,13 +66,16 @@ def test_a_kernel_compiled_by_one_process_is_loaded_from_disk_by_the_next_with_t
     first_result = predicted(first, arguments)
     assert sum(first._compiled_predict.stats.cache_misses.values()) == 1
     assert not first._compiled_predict.stats.cache_hits
-    second = fresh_load(text, tmp_path / "second", monkeypatch)
-    second_result = predicted(second, arguments)
-    assert sum(second._compiled_predict.stats.cache_hits.values()) == 1
-    assert not second._compiled_predict.stats.cache_misses
-    for got, want in zip(second_result, first_result):
-        assert np.array_equal(got, want)
-    assert second_result[1].tobytes() == predicted(py, arguments)[1].tobytes()  # the module's own kernel's numbers
+    (tmp_path / "second").mkdir()
+    (tmp_path / "second" / "m.py").write_text(text)  # another path: another module name in the other process
+    np.savez(tmp_path / "inputs.npz", **{k: arguments[k] for k in ("x", "P", "Phi", "Qd")})
+    done = subprocess.run([sys.executable, "-c", OTHER_PROCESS, str(tmp_path / "second" / "m.py"),
+                           str(tmp_path / "inputs.npz"), str(tmp_path / "result.npz")],
+                          capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["1", "0"]  # one cache hit, nothing compiled
+    second_result = np.load(tmp_path / "result.npz")
+    assert np.array_equal(second_result["x"], first_result[0]) and np.array_equal(second_result["P"], first_result[1])
 
 
 def test_the_kernel_is_compiled_from_a_copy_named_by_the_sha256_of_the_exact_text(tmp_path):
