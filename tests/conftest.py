@@ -136,16 +136,20 @@ def _run_folder(tmp_path_factory) -> Path:
 def private_compile_cache(tmp_path_factory):
     """The suite's caches are its own, never the user's (child processes inherit them).
 
-    ``$MODELGEN_CACHE_DIR`` (compiled libraries, trajectories) and
+    ``$MODELGEN_CACHE_DIR`` (compiled libraries, trajectories),
     ``$XDG_CACHE_HOME`` (the compiled C navigators of modelgen.navigator.cnav)
-    point into this run's temporary folder, so that a run compiles what it
-    tests instead of taking it from an earlier run.  The workers of one run
-    share them: a library one worker compiled is a hit for the others (entries
-    are linked or renamed in whole, never replaced: modelgen.codegen.build).
+    and ``$MODELGEN_KERNEL_CACHE_DIR`` (the generated Python modules' numba
+    predict kernels, modelgen.codegen.kernel_cache, off for users) point into
+    this run's temporary folder, so that a run compiles what it tests instead
+    of taking it from an earlier run.  The workers of one run share them: a
+    library or kernel one worker compiled is a hit for the others (entries are
+    linked or renamed in whole, never replaced: modelgen.codegen.build; a
+    kernel is keyed by its module's exact text).
     """
     from modelgen.codegen.build import CACHE_ENV
+    from modelgen.codegen.kernel_cache import KERNEL_CACHE_ENV
 
-    folders = {CACHE_ENV: "modelgen-cache", "XDG_CACHE_HOME": "xdg-cache"}
+    folders = {CACHE_ENV: "modelgen-cache", "XDG_CACHE_HOME": "xdg-cache", KERNEL_CACHE_ENV: "kernel-cache"}
     before = {name: os.environ.get(name) for name in folders}
     for name, folder in folders.items():
         path = _run_folder(tmp_path_factory) / folder

@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from modelgen.codegen.kernel_cache import disk_cached_kernel
 from modelgen.codegen.layout import ModelSizes, c_layout
 from modelgen.codegen.options import CodegenOptions
 from modelgen.errors import ModelError
@@ -252,7 +253,8 @@ def store_library(folder: Path, key: str, payload: bytes) -> Path | None:
 #: module loaded from a file, so a module loaded again from the same text (another folder, another test,
 #: another check) takes the kernel compiled for the first.  Numba freezes the module's globals (N_STATES, the
 #: _KERNEL_* arrays) into the kernel as constants: they are part of the text, so the same text means the same
-#: kernel.  In memory only; nothing is written beside the module or anywhere else.
+#: kernel.  Nothing is written beside the module; with $MODELGEN_KERNEL_CACHE_DIR set, the kernel is also kept
+#: on disk there for other processes (:mod:`modelgen.codegen.kernel_cache`).
 _COMPILED_PREDICT_BY_TEXT: dict[str, Any] = {}
 
 
@@ -260,7 +262,8 @@ def load_python_module(path: Path) -> ModuleType:
     """Import a generated Python module from its file, under a unique name.
 
     Its numba predict kernel is the one already compiled in this process for the same module text, if any
-    (:data:`_COMPILED_PREDICT_BY_TEXT`).
+    (:data:`_COMPILED_PREDICT_BY_TEXT`), else the module's own, cached on disk when $MODELGEN_KERNEL_CACHE_DIR is
+    set (:func:`modelgen.codegen.kernel_cache.disk_cached_kernel`).
     """
     path = Path(path)
     digest = hashlib.sha1(str(path.resolve()).encode()).hexdigest()[:10]
@@ -269,7 +272,7 @@ def load_python_module(path: Path) -> ModuleType:
     if spec is None or spec.loader is None:
         raise ModelError(f"{path}: cannot be imported as a Python module")
     try:
-        text_digest = hashlib.sha256(path.read_bytes()).hexdigest()
+        text = path.read_bytes()
     except OSError as exc:
         raise ModelError(f"{path}: cannot be read ({exc.strerror or exc})") from None
     module = importlib.util.module_from_spec(spec)
@@ -277,7 +280,10 @@ def load_python_module(path: Path) -> ModuleType:
     spec.loader.exec_module(module)
     kernel = getattr(module, "_compiled_predict", None)
     if getattr(module, "COMPILED", False) and hasattr(kernel, "py_func"):  # a numba dispatcher
-        module._compiled_predict = _COMPILED_PREDICT_BY_TEXT.setdefault(text_digest, kernel)
+        text_digest = hashlib.sha256(text).hexdigest()
+        if text_digest not in _COMPILED_PREDICT_BY_TEXT:
+            _COMPILED_PREDICT_BY_TEXT[text_digest] = disk_cached_kernel(kernel, text)
+        module._compiled_predict = _COMPILED_PREDICT_BY_TEXT[text_digest]
     return module
 
 
