@@ -136,6 +136,19 @@ def discretize_100(results: Results) -> str:
             f"(order {check['order']}) and {(small['instructions'] - predict) / 1e6:.2f}M at order {small['order']}")
 
 
+def cycle(results: Results) -> str:
+    """Part (b) of bench_cycle.py, modelgen (full P) against CasADi at each model and step, with instructions per floor flop."""
+    rows = [r for r in results("cycle") if r["part"] == "b"]
+    steps = sorted({(r["n"], r["T"]) for r in rows}, key=lambda k: (k[0], -k[1]))
+    figures = []
+    for n, T in steps:
+        ours, casadi = _row(rows, n=n, T=T, impl="modelgen"), _row(rows, n=n, T=T, impl="casadi")
+        figures.append(f"{ours['instructions']:,.0f} against {casadi['instructions']:,.0f} at {n} states and T = {T:.3g} s "
+                       f"({ours['instructions'] / casadi['instructions']:.2f} times; "
+                       f"{ours['instructions'] / ours['floor_flops']:.2f} per flop of the floor)")
+    return "part (b), modelgen's C against CasADi's in instructions per call: " + "; ".join(figures)
+
+
 def van_loan(results: Results) -> str:
     rows = results("van_loan")
     ratios = sorted(_row(rows, side="van-loan", T=T)["instructions"] / _row(rows, side="taylor", T=T)["instructions"]
@@ -171,6 +184,7 @@ BLOCKS: dict[str, Callable[[Results], str]] = {
     "presets": presets,
     "derivation": derivation,
     "discretize_100": discretize_100,
+    "cycle": cycle,
     "van_loan": van_loan,
     "montecarlo_worker": montecarlo_worker,
     "simulate_memory": simulate_memory,

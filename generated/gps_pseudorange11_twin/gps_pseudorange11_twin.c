@@ -356,12 +356,15 @@ static const signed char balance_exponent[GPS_PSEUDORANGE11_TWIN_N_STATES] = { 1
    at generation time: Osborne's balancing of F at the model's check operating point
            (nominal_scaling;
    any D gives a valid bound); the sums in the reference's order (row by row), d_j / d_i an exact
-   power of two.  A plan on it that needs a doubling is retaken on rebalanced_norm. */
+   power of two.  A plan on it that needs a doubling is retaken on rebalanced_norm.  *rows_sum: the
+           sum of
+   the rows' sums, finite only if every entry of F is (discretize's test of F, before it uses the
+           norm). */
 static gps_pseudorange11_twin_scalar balanced_norm(const gps_pseudorange11_twin_matrices *restrict
-        m)
+        m, gps_pseudorange11_twin_scalar *rows_sum)
 {
     gps_pseudorange11_twin_scalar norm = 0.0;
-    lane_pair lanes;
+    lane_pair lanes, total;
     lanes = lane_pair_product(lane_pair_of(fabs(m->F[9]), fabs(m->F[14])), lane_pair_of(2048.0,
             2048.0));
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[10]), fabs(m->F[15])),
@@ -373,6 +376,7 @@ static gps_pseudorange11_twin_scalar balanced_norm(const gps_pseudorange11_twin_
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[13]), fabs(m->F[18])),
             lane_pair_of(3.0517578125e-05, 1.52587890625e-05));
     norm = lane_pair_max(lanes, norm);
+    total = lanes;
     lanes = lane_pair_product(lane_pair_of(fabs(m->F[19]), fabs(m->F[0])), lane_pair_of(64.0, 2.0));
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[20]), fabs(m->F[1])),
             lane_pair_of(2.0, 0.015625));
@@ -383,22 +387,30 @@ static gps_pseudorange11_twin_scalar balanced_norm(const gps_pseudorange11_twin_
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[23]), 0.0),
             lane_pair_of(3.0517578125e-05, 1.0));
     norm = lane_pair_max(lanes, norm);
+    total = lane_pair_add(total, lanes);
     lanes = lane_pair_product(lane_pair_of(fabs(m->F[3]), fabs(m->F[6])), lane_pair_of(0.5, 64.0));
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[4]), fabs(m->F[7])),
             lane_pair_of(0.0078125, 128.0));
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[5]), fabs(m->F[8])),
             lane_pair_of(0.00048828125, 0.015625));
     norm = lane_pair_max(lanes, norm);
+    total = lane_pair_add(total, lanes);
     lanes = lane_pair_of(fabs(m->F[24]), fabs(m->F[26]));
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[25]), fabs(m->F[27])),
             lane_pair_of(2.0, 2.0));
     norm = lane_pair_max(lanes, norm);
+    total = lane_pair_add(total, lanes);
     lanes = lane_pair_product(lane_pair_of(fabs(m->F[28]), fabs(m->F[30])), lane_pair_of(0.5,
             8.271806125530277e-25));
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[29]), 0.0), lane_pair_of(0.5, 1.0));
     norm = lane_pair_max(lanes, norm);
+    total = lane_pair_add(total, lanes);
+    *rows_sum = lane_pair_sum(total);
     return norm;
 }
+
+static int taylor_plan(const gps_pseudorange11_twin_scalar norm, const gps_pseudorange11_twin_scalar
+        T, int *halvings, int *order);
 
 /* ||F||_D at the actual operating point (modelgen.derivation.discretization.step_plan), for a plan
         on the
@@ -406,13 +418,15 @@ static gps_pseudorange11_twin_scalar balanced_norm(const gps_pseudorange11_twin_
            balancing
    in powers of two, starting from the fixed D (at the check operating point one sweep finds it a
            fixed
-   point) and stopped at a fixed point; the sums in the reference's order (row by row).
+   point), stopped at a fixed point or after the first sweep whose norm needs no doubling at step T
+           (no
+   further sweep could take one away); the sums in the reference's order (row by row).
    Not inlined: it runs only when a doubling is at stake, and inlined, gcc -O2 would keep
    balanced_norm's |F_ij| on the stack for it on every call (bench/bench_cycle.py: 130
    instructions at 18 states). */
 GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar rebalanced_norm(const
-        gps_pseudorange11_twin_matrices *restrict m, gps_pseudorange11_twin_discretize_scratch
-        *restrict w)
+        gps_pseudorange11_twin_matrices *restrict m, const gps_pseudorange11_twin_scalar T,
+        gps_pseudorange11_twin_discretize_scratch *restrict w)
 {
     gps_pseudorange11_twin_scalar v, norm = 0.0;
     signed char exponent[GPS_PSEUDORANGE11_TWIN_N_STATES]; /* within [-40, 40] */
@@ -548,7 +562,58 @@ GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar rebalanced_norm(const
         changed |= modelgen_balance_step(w->row_sum[8], w->col_sum[8], &exponent[8]);
         changed |= modelgen_balance_step(w->row_sum[9], 0.0, &exponent[9]);
         changed |= modelgen_balance_step(0.0, w->col_sum[10], &exponent[10]);
+        if (changed) {
+            int halvings, order;
+            norm = 0.0;
+            v = fabs(m->F[0]) * modelgen_power_of_two(exponent[1] - exponent[0]) + fabs(m->F[1]) *
+                    modelgen_power_of_two(exponent[2] - exponent[0]) + fabs(m->F[2]) *
+                    modelgen_power_of_two(exponent[3] - exponent[0]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[3]) * modelgen_power_of_two(exponent[0] - exponent[1]) + fabs(m->F[4]) *
+                    modelgen_power_of_two(exponent[2] - exponent[1]) + fabs(m->F[5]) *
+                    modelgen_power_of_two(exponent[4] - exponent[1]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[6]) * modelgen_power_of_two(exponent[0] - exponent[2]) + fabs(m->F[7]) *
+                    modelgen_power_of_two(exponent[1] - exponent[2]) + fabs(m->F[8]) *
+                    modelgen_power_of_two(exponent[5] - exponent[2]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[9]) * modelgen_power_of_two(exponent[0] - exponent[3]) + fabs(m->F[10]) *
+                    modelgen_power_of_two(exponent[4] - exponent[3]) + fabs(m->F[11]) *
+                    modelgen_power_of_two(exponent[5] - exponent[3]) + fabs(m->F[12]) *
+                    modelgen_power_of_two(exponent[7] - exponent[3]) + fabs(m->F[13]) *
+                    modelgen_power_of_two(exponent[8] - exponent[3]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[14]) * modelgen_power_of_two(exponent[1] - exponent[4]) + fabs(m->F[15]) *
+                    modelgen_power_of_two(exponent[3] - exponent[4]) + fabs(m->F[16]) *
+                    modelgen_power_of_two(exponent[5] - exponent[4]) + fabs(m->F[17]) *
+                    modelgen_power_of_two(exponent[6] - exponent[4]) + fabs(m->F[18]) *
+                    modelgen_power_of_two(exponent[8] - exponent[4]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[19]) * modelgen_power_of_two(exponent[2] - exponent[5]) + fabs(m->F[20]) *
+                    modelgen_power_of_two(exponent[3] - exponent[5]) + fabs(m->F[21]) *
+                    modelgen_power_of_two(exponent[4] - exponent[5]) + fabs(m->F[22]) *
+                    modelgen_power_of_two(exponent[6] - exponent[5]) + fabs(m->F[23]) *
+                    modelgen_power_of_two(exponent[7] - exponent[5]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[24]) * modelgen_power_of_two(exponent[7] - exponent[6]) + fabs(m->F[25]) *
+                    modelgen_power_of_two(exponent[8] - exponent[6]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[26]) * modelgen_power_of_two(exponent[6] - exponent[7]) + fabs(m->F[27]) *
+                    modelgen_power_of_two(exponent[8] - exponent[7]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[28]) * modelgen_power_of_two(exponent[6] - exponent[8]) + fabs(m->F[29]) *
+                    modelgen_power_of_two(exponent[7] - exponent[8]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[30]) * modelgen_power_of_two(exponent[10] - exponent[9]);
+            norm = v > norm ? v : norm;
+
+            if (taylor_plan(norm, T, &halvings, &order) == GPS_PSEUDORANGE11_TWIN_OK && halvings ==
+                    0) {
+                return norm;
+            }
+        }
     }
+    norm = 0.0;
     v = fabs(m->F[0]) * modelgen_power_of_two(exponent[1] - exponent[0]) + fabs(m->F[1]) *
             modelgen_power_of_two(exponent[2] - exponent[0]) + fabs(m->F[2]) *
             modelgen_power_of_two(exponent[3] - exponent[0]);
@@ -590,6 +655,7 @@ GPS_PSEUDORANGE11_TWIN_BLOCK gps_pseudorange11_twin_scalar rebalanced_norm(const
     norm = v > norm ? v : norm;
     v = fabs(m->F[30]) * modelgen_power_of_two(exponent[10] - exponent[9]);
     norm = v > norm ? v : norm;
+
     return norm;
 }
 
@@ -2476,19 +2542,13 @@ int gps_pseudorange11_twin_discretize(const gps_pseudorange11_twin_matrices *res
     if (!(T > 0.0)) {
         return GPS_PSEUDORANGE11_TWIN_ERR_NOT_POSITIVE;
     }
+    /* F's test is the sum of balanced_norm's rows (computed here, used only once F is known
+            finite) */
+    norm = balanced_norm(m, &sums[0]);
     /* every value finite: their sum, in four partial sums four values a step (which gcc -O2
        vectorizes as two pairs), is finite only if every value is; a sum that is not (a value that
                is
        not finite, or an overflow of finite values) is decided value by value */
-    for (e = 0; e + 3 < GPS_PSEUDORANGE11_TWIN_NNZ_F; e += 4) {
-        sums[0] += m->F[e];
-        sums[1] += m->F[e + 1];
-        sums[2] += m->F[e + 2];
-        sums[3] += m->F[e + 3];
-    }
-    for (; e < GPS_PSEUDORANGE11_TWIN_NNZ_F; ++e) {
-        sums[0] += m->F[e];
-    }
     for (e = 0; e + 3 < GPS_PSEUDORANGE11_TWIN_NNZ_G; e += 4) {
         sums[0] += m->G[e];
         sums[1] += m->G[e + 1];
@@ -2538,13 +2598,12 @@ int gps_pseudorange11_twin_discretize(const gps_pseudorange11_twin_matrices *res
     /* Scaling and squaring (modelgen/derivation/discretization.py): the series over h = T / 2^s,
        of the order the plan chose, then s doublings Phi(2h) = Phi(h)^2 and
        S(2h) = (S(h) + Phi(h) S(h)) / 2, where h S(h) = int_0^h e^{F s} ds. */
-    norm = balanced_norm(m);
     status = taylor_plan(norm, T, &halvings, &order);
     if (status != GPS_PSEUDORANGE11_TWIN_OK || halvings > 0) {
         /* a doubling at stake: the plan on F's own balancing at this operating point, from the
                 fixed D
            (modelgen.derivation.discretization.step_plan) */
-        const gps_pseudorange11_twin_scalar rebalanced = rebalanced_norm(m, w);
+        const gps_pseudorange11_twin_scalar rebalanced = rebalanced_norm(m, T, w);
         if (rebalanced < norm || status != GPS_PSEUDORANGE11_TWIN_OK) {
             status = taylor_plan(rebalanced < norm ? rebalanced : norm, T, &halvings, &order);
         }

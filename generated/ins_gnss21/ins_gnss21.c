@@ -577,11 +577,15 @@ static const signed char balance_exponent[INS_GNSS21_N_STATES] = { 15, 15, 10, 3
    at generation time: Osborne's balancing of F at the model's check operating point
            (nominal_scaling;
    any D gives a valid bound); the sums in the reference's order (row by row), d_j / d_i an exact
-   power of two.  A plan on it that needs a doubling is retaken on rebalanced_norm. */
-static ins_gnss21_scalar balanced_norm(const ins_gnss21_matrices *restrict m)
+   power of two.  A plan on it that needs a doubling is retaken on rebalanced_norm.  *rows_sum: the
+           sum of
+   the rows' sums, finite only if every entry of F is (discretize's test of F, before it uses the
+           norm). */
+static ins_gnss21_scalar balanced_norm(const ins_gnss21_matrices *restrict m, ins_gnss21_scalar
+        *rows_sum)
 {
     ins_gnss21_scalar norm = 0.0;
-    lane_pair lanes;
+    lane_pair lanes, total;
     lanes = lane_pair_product(lane_pair_of(fabs(m->F[29]), fabs(m->F[9])), lane_pair_of(512.0,
             1.0));
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[30]), fabs(m->F[10])),
@@ -605,6 +609,7 @@ static ins_gnss21_scalar balanced_norm(const ins_gnss21_matrices *restrict m)
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[39]), 0.0),
             lane_pair_of(4.547473508864641e-13, 1.0));
     norm = lane_pair_max(lanes, norm);
+    total = lanes;
     lanes = lane_pair_product(lane_pair_of(fabs(m->F[19]), fabs(m->F[40])), lane_pair_of(1.0,
             8192.0));
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[20]), fabs(m->F[41])),
@@ -626,6 +631,7 @@ static ins_gnss21_scalar balanced_norm(const ins_gnss21_matrices *restrict m)
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[28]), 0.0),
             lane_pair_of(1.1368683772161603e-13, 1.0));
     norm = lane_pair_max(lanes, norm);
+    total = lane_pair_add(total, lanes);
     lanes = lane_pair_product(lane_pair_of(fabs(m->F[49]), fabs(m->F[58])), lane_pair_of(8192.0,
             2048.0));
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[50]), fabs(m->F[59])),
@@ -645,31 +651,43 @@ static ins_gnss21_scalar balanced_norm(const ins_gnss21_matrices *restrict m)
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[57]), fabs(m->F[66])),
             lane_pair_of(9.313225746154785e-10, 2.3283064365386963e-10));
     norm = lane_pair_max(lanes, norm);
+    total = lane_pair_add(total, lanes);
     lanes = lane_pair_of(fabs(m->F[0]), fabs(m->F[3]));
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[1]), fabs(m->F[4])),
             lane_pair_of(0.03125, 0.03125));
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[2]), fabs(m->F[5])),
             lane_pair_of(0.000244140625, 0.000244140625));
     norm = lane_pair_max(lanes, norm);
+    total = lane_pair_add(total, lanes);
     lanes = lane_pair_product(lane_pair_of(fabs(m->F[6]), fabs(m->F[67])), lane_pair_of(32.0, 1.0));
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[7]), 0.0), lane_pair_of(32.0, 1.0));
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabs(m->F[8]), 0.0), lane_pair_of(0.001953125,
             1.0));
     norm = lane_pair_max(lanes, norm);
+    total = lane_pair_add(total, lanes);
     lanes = lane_pair_of(fabs(m->F[68]), fabs(m->F[69]));
     norm = lane_pair_max(lanes, norm);
+    total = lane_pair_add(total, lanes);
     lanes = lane_pair_of(fabs(m->F[70]), fabs(m->F[71]));
     norm = lane_pair_max(lanes, norm);
+    total = lane_pair_add(total, lanes);
     lanes = lane_pair_of(fabs(m->F[72]), fabs(m->F[73]));
     norm = lane_pair_max(lanes, norm);
+    total = lane_pair_add(total, lanes);
     lanes = lane_pair_of(fabs(m->F[74]), fabs(m->F[75]));
     norm = lane_pair_max(lanes, norm);
+    total = lane_pair_add(total, lanes);
     lanes = lane_pair_of(fabs(m->F[76]), fabs(m->F[77]));
     norm = lane_pair_max(lanes, norm);
+    total = lane_pair_add(total, lanes);
     const ins_gnss21_scalar v = fabs(m->F[78]);
     norm = v > norm ? v : norm;
+    *rows_sum = lane_pair_sum(total) + v;
     return norm;
 }
+
+static int taylor_plan(const ins_gnss21_scalar norm, const ins_gnss21_scalar T, int *halvings, int
+        *order);
 
 /* ||F||_D at the actual operating point (modelgen.derivation.discretization.step_plan), for a plan
         on the
@@ -677,12 +695,14 @@ static ins_gnss21_scalar balanced_norm(const ins_gnss21_matrices *restrict m)
            balancing
    in powers of two, starting from the fixed D (at the check operating point one sweep finds it a
            fixed
-   point) and stopped at a fixed point; the sums in the reference's order (row by row).
+   point), stopped at a fixed point or after the first sweep whose norm needs no doubling at step T
+           (no
+   further sweep could take one away); the sums in the reference's order (row by row).
    Not inlined: it runs only when a doubling is at stake, and inlined, gcc -O2 would keep
    balanced_norm's |F_ij| on the stack for it on every call (bench/bench_cycle.py: 130
    instructions at 18 states). */
-INS_GNSS21_BLOCK ins_gnss21_scalar rebalanced_norm(const ins_gnss21_matrices *restrict m,
-        ins_gnss21_discretize_scratch *restrict w)
+INS_GNSS21_BLOCK ins_gnss21_scalar rebalanced_norm(const ins_gnss21_matrices *restrict m, const
+        ins_gnss21_scalar T, ins_gnss21_discretize_scratch *restrict w)
 {
     ins_gnss21_scalar v, norm = 0.0;
     signed char exponent[INS_GNSS21_N_STATES]; /* within [-40, 40] */
@@ -946,7 +966,116 @@ INS_GNSS21_BLOCK ins_gnss21_scalar rebalanced_norm(const ins_gnss21_matrices *re
         changed |= modelgen_balance_step(0.0, w->col_sum[18], &exponent[18]);
         changed |= modelgen_balance_step(0.0, w->col_sum[19], &exponent[19]);
         changed |= modelgen_balance_step(0.0, w->col_sum[20], &exponent[20]);
+        if (changed) {
+            int halvings, order;
+            norm = 0.0;
+            v = fabs(m->F[0]) * modelgen_power_of_two(exponent[1] - exponent[0]) + fabs(m->F[1]) *
+                    modelgen_power_of_two(exponent[2] - exponent[0]) + fabs(m->F[2]) *
+                    modelgen_power_of_two(exponent[3] - exponent[0]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[3]) * modelgen_power_of_two(exponent[0] - exponent[1]) + fabs(m->F[4]) *
+                    modelgen_power_of_two(exponent[2] - exponent[1]) + fabs(m->F[5]) *
+                    modelgen_power_of_two(exponent[4] - exponent[1]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[6]) * modelgen_power_of_two(exponent[0] - exponent[2]) + fabs(m->F[7]) *
+                    modelgen_power_of_two(exponent[1] - exponent[2]) + fabs(m->F[8]) *
+                    modelgen_power_of_two(exponent[5] - exponent[2]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[9]) * modelgen_power_of_two(exponent[4] - exponent[3]) + fabs(m->F[10]) *
+                    modelgen_power_of_two(exponent[5] - exponent[3]) + fabs(m->F[11]) *
+                    modelgen_power_of_two(exponent[7] - exponent[3]) + fabs(m->F[12]) *
+                    modelgen_power_of_two(exponent[8] - exponent[3]) + fabs(m->F[13]) *
+                    modelgen_power_of_two(exponent[12] - exponent[3]) + fabs(m->F[14]) *
+                    modelgen_power_of_two(exponent[13] - exponent[3]) + fabs(m->F[15]) *
+                    modelgen_power_of_two(exponent[14] - exponent[3]) + fabs(m->F[16]) *
+                    modelgen_power_of_two(exponent[18] - exponent[3]) + fabs(m->F[17]) *
+                    modelgen_power_of_two(exponent[19] - exponent[3]) + fabs(m->F[18]) *
+                    modelgen_power_of_two(exponent[20] - exponent[3]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[19]) * modelgen_power_of_two(exponent[3] - exponent[4]) + fabs(m->F[20]) *
+                    modelgen_power_of_two(exponent[5] - exponent[4]) + fabs(m->F[21]) *
+                    modelgen_power_of_two(exponent[6] - exponent[4]) + fabs(m->F[22]) *
+                    modelgen_power_of_two(exponent[8] - exponent[4]) + fabs(m->F[23]) *
+                    modelgen_power_of_two(exponent[12] - exponent[4]) + fabs(m->F[24]) *
+                    modelgen_power_of_two(exponent[13] - exponent[4]) + fabs(m->F[25]) *
+                    modelgen_power_of_two(exponent[14] - exponent[4]) + fabs(m->F[26]) *
+                    modelgen_power_of_two(exponent[18] - exponent[4]) + fabs(m->F[27]) *
+                    modelgen_power_of_two(exponent[19] - exponent[4]) + fabs(m->F[28]) *
+                    modelgen_power_of_two(exponent[20] - exponent[4]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[29]) * modelgen_power_of_two(exponent[2] - exponent[5]) + fabs(m->F[30]) *
+                    modelgen_power_of_two(exponent[3] - exponent[5]) + fabs(m->F[31]) *
+                    modelgen_power_of_two(exponent[4] - exponent[5]) + fabs(m->F[32]) *
+                    modelgen_power_of_two(exponent[6] - exponent[5]) + fabs(m->F[33]) *
+                    modelgen_power_of_two(exponent[7] - exponent[5]) + fabs(m->F[34]) *
+                    modelgen_power_of_two(exponent[12] - exponent[5]) + fabs(m->F[35]) *
+                    modelgen_power_of_two(exponent[13] - exponent[5]) + fabs(m->F[36]) *
+                    modelgen_power_of_two(exponent[14] - exponent[5]) + fabs(m->F[37]) *
+                    modelgen_power_of_two(exponent[18] - exponent[5]) + fabs(m->F[38]) *
+                    modelgen_power_of_two(exponent[19] - exponent[5]) + fabs(m->F[39]) *
+                    modelgen_power_of_two(exponent[20] - exponent[5]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[40]) * modelgen_power_of_two(exponent[4] - exponent[6]) + fabs(m->F[41]) *
+                    modelgen_power_of_two(exponent[7] - exponent[6]) + fabs(m->F[42]) *
+                    modelgen_power_of_two(exponent[8] - exponent[6]) + fabs(m->F[43]) *
+                    modelgen_power_of_two(exponent[9] - exponent[6]) + fabs(m->F[44]) *
+                    modelgen_power_of_two(exponent[10] - exponent[6]) + fabs(m->F[45]) *
+                    modelgen_power_of_two(exponent[11] - exponent[6]) + fabs(m->F[46]) *
+                    modelgen_power_of_two(exponent[15] - exponent[6]) + fabs(m->F[47]) *
+                    modelgen_power_of_two(exponent[16] - exponent[6]) + fabs(m->F[48]) *
+                    modelgen_power_of_two(exponent[17] - exponent[6]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[49]) * modelgen_power_of_two(exponent[3] - exponent[7]) + fabs(m->F[50]) *
+                    modelgen_power_of_two(exponent[6] - exponent[7]) + fabs(m->F[51]) *
+                    modelgen_power_of_two(exponent[8] - exponent[7]) + fabs(m->F[52]) *
+                    modelgen_power_of_two(exponent[9] - exponent[7]) + fabs(m->F[53]) *
+                    modelgen_power_of_two(exponent[10] - exponent[7]) + fabs(m->F[54]) *
+                    modelgen_power_of_two(exponent[11] - exponent[7]) + fabs(m->F[55]) *
+                    modelgen_power_of_two(exponent[15] - exponent[7]) + fabs(m->F[56]) *
+                    modelgen_power_of_two(exponent[16] - exponent[7]) + fabs(m->F[57]) *
+                    modelgen_power_of_two(exponent[17] - exponent[7]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[58]) * modelgen_power_of_two(exponent[4] - exponent[8]) + fabs(m->F[59]) *
+                    modelgen_power_of_two(exponent[6] - exponent[8]) + fabs(m->F[60]) *
+                    modelgen_power_of_two(exponent[7] - exponent[8]) + fabs(m->F[61]) *
+                    modelgen_power_of_two(exponent[9] - exponent[8]) + fabs(m->F[62]) *
+                    modelgen_power_of_two(exponent[10] - exponent[8]) + fabs(m->F[63]) *
+                    modelgen_power_of_two(exponent[11] - exponent[8]) + fabs(m->F[64]) *
+                    modelgen_power_of_two(exponent[15] - exponent[8]) + fabs(m->F[65]) *
+                    modelgen_power_of_two(exponent[16] - exponent[8]) + fabs(m->F[66]) *
+                    modelgen_power_of_two(exponent[17] - exponent[8]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[67]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[68]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[69]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[70]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[71]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[72]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[73]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[74]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[75]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[76]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[77]);
+            norm = v > norm ? v : norm;
+            v = fabs(m->F[78]);
+            norm = v > norm ? v : norm;
+
+            if (taylor_plan(norm, T, &halvings, &order) == INS_GNSS21_OK && halvings == 0) {
+                return norm;
+            }
+        }
     }
+    norm = 0.0;
     v = fabs(m->F[0]) * modelgen_power_of_two(exponent[1] - exponent[0]) + fabs(m->F[1]) *
             modelgen_power_of_two(exponent[2] - exponent[0]) + fabs(m->F[2]) *
             modelgen_power_of_two(exponent[3] - exponent[0]);
@@ -1047,6 +1176,7 @@ INS_GNSS21_BLOCK ins_gnss21_scalar rebalanced_norm(const ins_gnss21_matrices *re
     norm = v > norm ? v : norm;
     v = fabs(m->F[78]);
     norm = v > norm ? v : norm;
+
     return norm;
 }
 
@@ -5955,19 +6085,13 @@ int ins_gnss21_discretize(const ins_gnss21_matrices *restrict m, ins_gnss21_scal
     if (!(T > 0.0)) {
         return INS_GNSS21_ERR_NOT_POSITIVE;
     }
+    /* F's test is the sum of balanced_norm's rows (computed here, used only once F is known
+            finite) */
+    norm = balanced_norm(m, &sums[0]);
     /* every value finite: their sum, in four partial sums four values a step (which gcc -O2
        vectorizes as two pairs), is finite only if every value is; a sum that is not (a value that
                is
        not finite, or an overflow of finite values) is decided value by value */
-    for (e = 0; e + 3 < INS_GNSS21_NNZ_F; e += 4) {
-        sums[0] += m->F[e];
-        sums[1] += m->F[e + 1];
-        sums[2] += m->F[e + 2];
-        sums[3] += m->F[e + 3];
-    }
-    for (; e < INS_GNSS21_NNZ_F; ++e) {
-        sums[0] += m->F[e];
-    }
     for (e = 0; e + 3 < INS_GNSS21_NNZ_G; e += 4) {
         sums[0] += m->G[e];
         sums[1] += m->G[e + 1];
@@ -6017,13 +6141,12 @@ int ins_gnss21_discretize(const ins_gnss21_matrices *restrict m, ins_gnss21_scal
     /* Scaling and squaring (modelgen/derivation/discretization.py): the series over h = T / 2^s,
        of the order the plan chose, then s doublings Phi(2h) = Phi(h)^2 and
        S(2h) = (S(h) + Phi(h) S(h)) / 2, where h S(h) = int_0^h e^{F s} ds. */
-    norm = balanced_norm(m);
     status = taylor_plan(norm, T, &halvings, &order);
     if (status != INS_GNSS21_OK || halvings > 0) {
         /* a doubling at stake: the plan on F's own balancing at this operating point, from the
                 fixed D
            (modelgen.derivation.discretization.step_plan) */
-        const ins_gnss21_scalar rebalanced = rebalanced_norm(m, w);
+        const ins_gnss21_scalar rebalanced = rebalanced_norm(m, T, w);
         if (rebalanced < norm || status != INS_GNSS21_OK) {
             status = taylor_plan(rebalanced < norm ? rebalanced : norm, T, &halvings, &order);
         }

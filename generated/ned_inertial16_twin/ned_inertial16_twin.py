@@ -367,13 +367,16 @@ def _balanced_norm(F):
     return max(total)
 
 
-def _rebalanced_norm(F):
-    """||F||_D at the actual operating point: Osborne's sweeps from the fixed D (as the C discretize's rebalanced_norm)."""
-    return _swept_norm(F, _BALANCE_START)
+def _rebalanced_norm(F, T):
+    """||F||_D at the actual operating point: Osborne's sweeps from the fixed D, stopped once the plan at step T needs
+    no doubling (as the C discretize's rebalanced_norm and modelgen.derivation.discretization.step_plan)."""
+    return _swept_norm(F, _BALANCE_START, T)
 
 
-def _swept_norm(F, start):
+def _swept_norm(F, start, T=None):
     """max_i sum_j |F_ij| d_j / d_i, D = 2^e from at most 8 Jacobi sweeps of Osborne's balancing in powers of two from e = start.
+
+    With a step T the sweeps stop after the first whose norm needs no doubling at T (_no_doubling).
 
     The same sums, in the same order (entry by entry, as bincount adds), as
     the C discretize and modelgen.derivation.discretization.balancing_exponents
@@ -403,6 +406,13 @@ def _swept_norm(F, start):
         if new == exponent:
             break  # a fixed point: further sweeps change nothing
         exponent = new
+        if T is not None and _no_doubling(_exponent_norm(size, exponent), T):
+            break
+    return _exponent_norm(size, exponent)
+
+
+def _exponent_norm(size, exponent):
+    """max_i sum_j |F_ij| d_j / d_i, D = 2^exponent, |F| entry by entry in ``size``."""
     d = [math.ldexp(1.0, e) for e in exponent]
     total = [0.0] * N_STATES
     for (i, j), a in zip(_F_ENTRIES, size):
@@ -410,6 +420,14 @@ def _swept_norm(F, start):
     if not math.isfinite(sum(total)):
         return math.nan
     return max(total)
+
+
+def _no_doubling(norm, T):
+    """Whether the plan on this norm at step T needs no doubling (then no further sweep could take one away)."""
+    try:
+        return _taylor_plan(norm, T)[0] == 0
+    except ValueError:
+        return False
 
 
 def _step_error_bound(theta, order, halvings):
@@ -484,7 +502,7 @@ def discretize(F, G, q, T):
     except ValueError:  # beyond 64 doublings in the fixed D: F's own balancing may still reach it
         s, order = 65, TAYLOR_ORDER
     if s:  # a doubling at stake: the plan on F's own balancing at this operating point (step_plan)
-        rebalanced = _rebalanced_norm(F)
+        rebalanced = _rebalanced_norm(F, T)
         if rebalanced < norm or s > 64:
             s, order = _taylor_plan(min(rebalanced, norm), T)
     h = math.ldexp(T, -s)

@@ -247,7 +247,8 @@ def compact_discretize_cost(tables: CompactDiscretizeTables, order: int, ud: boo
     diagonal and row c's off-diagonal entries of F), m - 2 span levels and
     E = A S (each :func:`horner_level_flops`), then Phi = I + E.  The norm:
     with D fixed at generation time (``fixed_scaling``) one product and sum
-    per nonzero of F; otherwise also up to 8 sweeps, each a product and two
+    per nonzero of F and one sum per row (the rows' total, F's finiteness
+    test); otherwise also up to 8 sweeps, each a product and two
     sums per off-diagonal nonzero; the plan's bound as the unrolled count's
     (3 m + 6 products, m + 2 sums).
     """
@@ -290,5 +291,6 @@ def compact_discretize_cost(tables: CompactDiscretizeTables, order: int, ud: boo
             entries += 1
     doubling = OperationCount(doubling_products + entries, doubling_products + 3 * entries)  # 2 E + E^2, S + E S / 2
     sweeps = 0 if fixed_scaling else 8 * sum(off_diagonal)
-    norm = OperationCount(sweeps + nnz_f + 3 * order + 6, 2 * sweeps + nnz_f + order + 2)
+    rows_sum = n if fixed_scaling else 0  # the sum of the rows' sums, discretize's test of F
+    norm = OperationCount(sweeps + nnz_f + 3 * order + 6, 2 * sweeps + nnz_f + order + 2 + rows_sum)
     return CompactDiscretizeCost(tuple(series), doubling, noise, norm)

@@ -68,7 +68,8 @@ def pattern_count(structure: FilterStructure, order: int, ud: bool, fixed_scalin
         mul, add = mul + 2 * int(gamma.sum()) + pairs, add + pairs
     off = nnz - int(np.trace(F))
     sweeps = 0 if fixed_scaling or not nnz else 8 * off
-    norm = OperationCount(sweeps + nnz + 3 * order + 6, 2 * sweeps + nnz + order + 2) if nnz else OperationCount(0, 0)
+    rows_sum = structure.n_states if fixed_scaling else 0  # the fixed-D norm's total of its rows: F's finiteness test
+    norm = OperationCount(sweeps + nnz + 3 * order + 6, 2 * sweeps + nnz + order + 2 + rows_sum) if nnz else OperationCount(0, 0)
     first = OperationCount(norm.multiplications + series[-1].multiplications + mul, norm.additions + series[-1].additions + add)
     return series, doubling, first
 
@@ -231,7 +232,8 @@ def measured_run(folder, name: str, T: float) -> dict[str, object]:
         if not count_text.isdigit():
             continue
         count = int(count_text)
-        for marker in ("horner_second_level(w", "horner_level(w->R[k", "doubling(w);", "changed |= modelgen_balance_step("):
+        for marker in ("horner_second_level(w", "horner_level(w->R[k", "doubling(w);", "changed |= modelgen_balance_step(",
+                       "if (taylor_plan(norm, T, &halvings, &order) == "):
             if marker in source:
                 calls[marker] = calls.get(marker, 0) + count
         if function.endswith(COUNTED) and not (function.endswith("_discretize") and function != f"{name}_discretize"):
@@ -244,6 +246,7 @@ def measured_run(folder, name: str, T: float) -> dict[str, object]:
         "order": 1 if not second else (2 if not levels else levels + 2),
         "halvings": calls.get("doubling(w);", 0),
         "sweeps": calls.get("changed |= modelgen_balance_step(", 0),
+        "sweep_norms": calls.get("if (taylor_plan(norm, T, &halvings, &order) == ", 0),  # a rebalancing sweep's norm
         "by_function": by_function,
     }
 
@@ -298,13 +301,16 @@ def test_an_instrumented_run_of_the_c_does_the_counted_flops(model, form, paper_
         run = measured_run(folder, name, T)
         sweeps = run["sweeps"] // n
         series, h = cost.series[run["order"] - 1], run["halvings"]
-        # a fixed D: the sweeps (from that D) and their norm run only when the plan on it needs a doubling (step_plan)
+        # a fixed D: the sweeps (from that D) and their norm run only when the plan on it needs a doubling (step_plan);
+        # each sweep that moved D takes its norm (the sweeps stop at one that leaves no doubling, which then is the
+        # norm returned: no doubling in the end), and F's test is the sum of the fixed-D norm's rows
         rebalanced = fixed and sweeps > 0
         assert run["sweeps"] == sweeps * n and (sweeps == 0 if fixed and h == 0 else 1 <= sweeps <= 8)
-        norms = nnz * (2 if rebalanced else 1)
+        assert run["sweep_norms"] <= sweeps and (run["sweep_norms"] == 0 or rebalanced)
+        norms = nnz * (1 + run["sweep_norms"] + (1 if rebalanced and h > 0 else 0))
         expected = OperationCount(
             series.multiplications + h * cost.doubling.multiplications + cost.noise.multiplications + norms + sweeps * off,
-            series.additions + h * cost.doubling.additions + cost.noise.additions + norms + 2 * sweeps * off,
+            series.additions + h * cost.doubling.additions + cost.noise.additions + norms + 2 * sweeps * off + (n if fixed else 0),
         )
         assert run["flops"] == expected, (T, run)
         seen_doublings.add(h > 0)

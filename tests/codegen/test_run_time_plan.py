@@ -68,6 +68,29 @@ def test_the_fixed_scaling_is_far_off_at_the_manoeuvre_and_the_plan_is_not(augme
     assert step_plan(F, 86400.0, 9, DEFAULT_TOLERANCE, scaling)[0] < taylor_plan(balanced_norm(F, scaling), 86400.0, 9)[0]
 
 
+def test_the_rebalancing_stops_at_the_first_sweep_that_takes_the_doublings_away(augmented):
+    """At the manoeuvre and T = 0.148 s one sweep from the fixed D leaves no doubling: the rebalancing stops there, on the
+    norm all eight sweeps reach; at T = 1 day a doubling stays at every sweep, and all of them run."""
+    from modelgen.derivation.discretization import balancing_exponents, rebalanced_norm, scaled_norm
+
+    derived, values, _ = augmented
+    F = derived.numeric(values)["F"]
+    scaling = nominal_scaling(derived)
+    full = balancing_exponents(F, scaling)
+    for T, sweeps in ((0.148, 1), (86400.0, 8)):
+        seen = []
+
+        def enough(exponents, T=T, seen=seen):
+            seen.append(tuple(exponents))
+            return taylor_plan(scaled_norm(F, exponents), T, 9)[0] == 0
+
+        stopped = balancing_exponents(F, scaling, enough)
+        assert len(seen) == sweeps, T
+        assert (stopped != full) == (sweeps == 1), T  # the eight sweeps go on moving the exponents
+        assert rebalanced_norm(F, scaling, T, 9) == scaled_norm(F, stopped) <= scaled_norm(F, full) * (1 + 1e-15), T
+    assert step_plan(F, 0.148, 9, DEFAULT_TOLERANCE, scaling) == (0, 9)
+
+
 def test_at_the_check_point_the_plan_is_the_fixed_scalings(augmented):
     """There the fixed D is F's own balancing: rebalancing from it changes nothing."""
     derived, _, _ = augmented
@@ -195,18 +218,19 @@ def test_the_compact_loops_rebalance_as_the_unrolled_code_does(augmented, tmp_pa
         assert relative_error(c.Qd, taylor_process_noise(gamma_ref, m["Q"], T)) < 1e-12
 
 
-def _c_norms(built, name: str, matrices: list[np.ndarray], tmp_path) -> list[tuple[float, float]]:
-    """(balanced_norm, rebalanced_norm) of the generated C, its static functions called directly, for each F."""
+def _c_norms(built, name: str, matrices: list[np.ndarray], tmp_path, T: float) -> list[tuple[float, float]]:
+    """(balanced_norm, rebalanced_norm at step T) of the generated C, its static functions called directly, for each F."""
     import subprocess
 
     entries = [(int(i), int(j)) for i, j in zip(*np.nonzero(built.derived.structure("F")))]
     sets = "\n".join(
         "    " + " ".join(f"m.F[{e}] = {float(F[i, j])!r};" for e, (i, j) in enumerate(entries))
-        + '\n    printf("%.17g %.17g\\n", balanced_norm(&m), rebalanced_norm(&m, &ws.discretize));'
+        + f'\n    printf("%.17g %.17g\\n", balanced_norm(&m, &rows_sum), rebalanced_norm(&m, {T!r}, &ws.discretize));'
         for F in matrices
     )
     (tmp_path / "norms.c").write_text(
         f'#include "{name}.c"\n#include <stdio.h>\nstatic {name}_matrices m;\nstatic {name}_workspace ws;\n'
+        f"static {name}_scalar rows_sum;\n"
         f"int main(void)\n{{\n{sets}\n    return 0;\n}}\n"
     )
     subprocess.run(["gcc", "-std=c99", "-O2", f"-I{built.folder}", "norms.c", "-o", "norms", "-lm"], cwd=tmp_path, check=True)
@@ -215,11 +239,13 @@ def _c_norms(built, name: str, matrices: list[np.ndarray], tmp_path) -> list[tup
 
 
 @pytest.mark.parametrize("compact", [False, True])
-def test_the_c_norms_are_the_references_bit_for_bit(augmented, compact, tmp_path, monkeypatch):
+@pytest.mark.parametrize("T", [0.148, 86400.0])
+def test_the_c_norms_are_the_references_bit_for_bit(augmented, compact, T, tmp_path, monkeypatch):
     """The fixed-D norm and the norm rebalanced from that D, in the unrolled and the compact C: the reference's exactly,
-    at the manoeuvre, the check point and random operating points on the same structure (so C plans as step_plan)."""
+    at the manoeuvre, the check point and random operating points on the same structure (so C plans as step_plan),
+    at a step where the rebalancing may stop early (0.148 s) and one where every sweep still leaves a doubling (1 day)."""
     from modelgen.codegen import kernels
-    from modelgen.derivation.discretization import balancing_exponents, scaled_norm
+    from modelgen.derivation.discretization import rebalanced_norm, scaled_norm
 
     derived, values, built = augmented
     if compact:
@@ -231,10 +257,10 @@ def test_the_c_norms_are_the_references_bit_for_bit(augmented, compact, tmp_path
     matrices = [F, derived.numeric(derived.model.check.parameter_values())["F"]]
     matrices += [np.where(F != 0, rng.standard_normal(F.shape) * 10.0 ** rng.integers(-8, 8, F.shape), 0.0) for _ in range(4)]
     matrices = [np.where(derived.structure("F"), G, 0.0) for G in matrices]
-    norms = _c_norms(built, derived.model.name, matrices, tmp_path)
+    norms = _c_norms(built, derived.model.name, matrices, tmp_path, T)
     for G, (fixed, rebalanced) in zip(matrices, norms):
         assert fixed == scaled_norm(G, scaling)
-        assert rebalanced == scaled_norm(G, balancing_exponents(G, scaling))
+        assert rebalanced == rebalanced_norm(G, scaling, T, 9)
     # the manoeuvre: 0.89 against 7.1.  The C program's first F is the manoeuvre's (it reads F's structural entries
     # only, which matrices[0] keeps), computed first, so from the same static state as in a program of its own
     assert norms[0][1] < 0.2 * scaled_norm(F, scaling)

@@ -151,6 +151,21 @@ def test_model_matrices_whose_sum_overflows_are_discretized_not_refused(compiled
         assert compiled.discretize(60.0) == OK
 
 
+def test_each_non_finite_entry_of_F_is_refused_by_discretize(compiled):
+    """F is tested by the sum of its balanced norm's rows (no pass of its own): a NaN or an infinity in any entry is refused."""
+    F = np.ctypeslib.as_array(compiled.matrices.F)
+    saved = F.copy()
+    try:
+        for k in range(F.size):
+            for bad in (np.nan, np.inf, -np.inf):
+                F[k] = bad
+                assert compiled.discretize(1.0) == ERR_NONFINITE, (k, bad)
+                F[k] = saved[k]
+    finally:
+        F[:] = saved
+        assert compiled.discretize(60.0) == OK
+
+
 def test_a_process_noise_that_overflows_is_refused(compiled):
     """Each row of Q_d is checked by its sum; an entry that is itself infinite is found by the entry-by-entry rescan."""
     if compiled.options.ud:

@@ -370,11 +370,15 @@ static const signed char balance_exponent[NED_DOPPLER18_N_STATES] = { -2, -2, -1
    at generation time: Osborne's balancing of F at the model's check operating point
            (nominal_scaling;
    any D gives a valid bound); the sums in the reference's order (row by row), d_j / d_i an exact
-   power of two.  A plan on it that needs a doubling is retaken on rebalanced_norm. */
-static ned_doppler18_scalar balanced_norm(const ned_doppler18_matrices *restrict m)
+   power of two.  A plan on it that needs a doubling is retaken on rebalanced_norm.  *rows_sum: the
+           sum of
+   the rows' sums, finite only if every entry of F is (discretize's test of F, before it uses the
+           norm). */
+static ned_doppler18_scalar balanced_norm(const ned_doppler18_matrices *restrict m,
+        ned_doppler18_scalar *rows_sum)
 {
     ned_doppler18_scalar norm = 0.0F;
-    lane_pair lanes;
+    lane_pair lanes, total;
     lanes = lane_pair_product(lane_pair_of(fabsf(m->F[0]), fabsf(m->F[19])), lane_pair_of(1.0F,
             0.5F));
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[1]), fabsf(m->F[20])),
@@ -396,6 +400,7 @@ static ned_doppler18_scalar balanced_norm(const ned_doppler18_matrices *restrict
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[9]), fabsf(m->F[28])),
             lane_pair_of(3.637978807091713e-12F, 1.8189894035458565e-12F));
     norm = lane_pair_max(lanes, norm);
+    total = lanes;
     lanes = lane_pair_product(lane_pair_of(fabsf(m->F[10]), fabsf(m->F[29])), lane_pair_of(1.0F,
             0.000244140625F));
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[11]), fabsf(m->F[30])),
@@ -415,6 +420,7 @@ static ned_doppler18_scalar balanced_norm(const ned_doppler18_matrices *restrict
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[18]), 0.0F),
             lane_pair_of(3.637978807091713e-12F, 1.0F));
     norm = lane_pair_max(lanes, norm);
+    total = lane_pair_add(total, lanes);
     lanes = lane_pair_product(lane_pair_of(fabsf(m->F[37]), fabsf(m->F[46])),
             lane_pair_of(0.0001220703125F, 1.862645149230957e-09F));
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[38]), fabsf(m->F[47])),
@@ -431,17 +437,25 @@ static ned_doppler18_scalar balanced_norm(const ned_doppler18_matrices *restrict
     lanes = lane_pair_add_product(lanes, lane_pair_of(fabsf(m->F[44]), 0.0F),
             lane_pair_of(0.00048828125F, 1.0F));
     norm = lane_pair_max(lanes, norm);
+    total = lane_pair_add(total, lanes);
     lanes = lane_pair_product(lane_pair_of(fabsf(m->F[45]), fabsf(m->F[48])), lane_pair_of(1024.0F,
             1.0F));
     norm = lane_pair_max(lanes, norm);
+    total = lane_pair_add(total, lanes);
     lanes = lane_pair_of(fabsf(m->F[49]), fabsf(m->F[50]));
     norm = lane_pair_max(lanes, norm);
+    total = lane_pair_add(total, lanes);
     lanes = lane_pair_of(fabsf(m->F[51]), fabsf(m->F[52]));
     norm = lane_pair_max(lanes, norm);
+    total = lane_pair_add(total, lanes);
     const ned_doppler18_scalar v = fabsf(m->F[53]);
     norm = v > norm ? v : norm;
+    *rows_sum = lane_pair_sum(total) + v;
     return norm;
 }
+
+static int taylor_plan(const ned_doppler18_scalar norm, const ned_doppler18_scalar T, int *halvings,
+        int *order);
 
 /* ||F||_D at the actual operating point (modelgen.derivation.discretization.step_plan), for a plan
         on the
@@ -449,12 +463,14 @@ static ned_doppler18_scalar balanced_norm(const ned_doppler18_matrices *restrict
            balancing
    in powers of two, starting from the fixed D (at the check operating point one sweep finds it a
            fixed
-   point) and stopped at a fixed point; the sums in the reference's order (row by row).
+   point), stopped at a fixed point or after the first sweep whose norm needs no doubling at step T
+           (no
+   further sweep could take one away); the sums in the reference's order (row by row).
    Not inlined: it runs only when a doubling is at stake, and inlined, gcc -O2 would keep
    balanced_norm's |F_ij| on the stack for it on every call (bench/bench_cycle.py: 130
    instructions at 18 states). */
 NED_DOPPLER18_BLOCK ned_doppler18_scalar rebalanced_norm(const ned_doppler18_matrices *restrict m,
-        ned_doppler18_discretize_scratch *restrict w)
+        const ned_doppler18_scalar T, ned_doppler18_discretize_scratch *restrict w)
 {
     ned_doppler18_scalar v, norm = 0.0F;
     signed char exponent[NED_DOPPLER18_N_STATES]; /* within [-40, 40] */
@@ -642,7 +658,81 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar rebalanced_norm(const ned_doppler18_mat
         changed |= modelgen_balance_step(0.0F, w->col_sum[13], &exponent[13]);
         changed |= modelgen_balance_step(0.0F, w->col_sum[14], &exponent[14]);
         changed |= modelgen_balance_step(0.0F, w->col_sum[15], &exponent[15]);
+        if (changed) {
+            int halvings, order;
+            norm = 0.0F;
+            v = fabsf(m->F[0]) * modelgen_power_of_two(exponent[1] - exponent[0]) + fabsf(m->F[1]) *
+                    modelgen_power_of_two(exponent[2] - exponent[0]) + fabsf(m->F[2]) *
+                    modelgen_power_of_two(exponent[4] - exponent[0]) + fabsf(m->F[3]) *
+                    modelgen_power_of_two(exponent[5] - exponent[0]) + fabsf(m->F[4]) *
+                    modelgen_power_of_two(exponent[7] - exponent[0]) + fabsf(m->F[5]) *
+                    modelgen_power_of_two(exponent[8] - exponent[0]) + fabsf(m->F[6]) *
+                    modelgen_power_of_two(exponent[9] - exponent[0]) + fabsf(m->F[7]) *
+                    modelgen_power_of_two(exponent[10] - exponent[0]) + fabsf(m->F[8]) *
+                    modelgen_power_of_two(exponent[11] - exponent[0]) + fabsf(m->F[9]) *
+                    modelgen_power_of_two(exponent[12] - exponent[0]);
+            norm = v > norm ? v : norm;
+            v = fabsf(m->F[10]) * modelgen_power_of_two(exponent[0] - exponent[1]) + fabsf(m->F[11])
+                    * modelgen_power_of_two(exponent[2] - exponent[1]) + fabsf(m->F[12]) *
+                    modelgen_power_of_two(exponent[3] - exponent[1]) + fabsf(m->F[13]) *
+                    modelgen_power_of_two(exponent[7] - exponent[1]) + fabsf(m->F[14]) *
+                    modelgen_power_of_two(exponent[8] - exponent[1]) + fabsf(m->F[15]) *
+                    modelgen_power_of_two(exponent[9] - exponent[1]) + fabsf(m->F[16]) *
+                    modelgen_power_of_two(exponent[10] - exponent[1]) + fabsf(m->F[17]) *
+                    modelgen_power_of_two(exponent[11] - exponent[1]) + fabsf(m->F[18]) *
+                    modelgen_power_of_two(exponent[12] - exponent[1]);
+            norm = v > norm ? v : norm;
+            v = fabsf(m->F[19]) * modelgen_power_of_two(exponent[0] - exponent[2]) + fabsf(m->F[20])
+                    * modelgen_power_of_two(exponent[1] - exponent[2]) + fabsf(m->F[21]) *
+                    modelgen_power_of_two(exponent[4] - exponent[2]) + fabsf(m->F[22]) *
+                    modelgen_power_of_two(exponent[5] - exponent[2]) + fabsf(m->F[23]) *
+                    modelgen_power_of_two(exponent[7] - exponent[2]) + fabsf(m->F[24]) *
+                    modelgen_power_of_two(exponent[8] - exponent[2]) + fabsf(m->F[25]) *
+                    modelgen_power_of_two(exponent[9] - exponent[2]) + fabsf(m->F[26]) *
+                    modelgen_power_of_two(exponent[10] - exponent[2]) + fabsf(m->F[27]) *
+                    modelgen_power_of_two(exponent[11] - exponent[2]) + fabsf(m->F[28]) *
+                    modelgen_power_of_two(exponent[12] - exponent[2]);
+            norm = v > norm ? v : norm;
+            v = fabsf(m->F[29]) * modelgen_power_of_two(exponent[1] - exponent[3]) + fabsf(m->F[30])
+                    * modelgen_power_of_two(exponent[2] - exponent[3]) + fabsf(m->F[31]) +
+                    fabsf(m->F[32]) * modelgen_power_of_two(exponent[4] - exponent[3]) +
+                    fabsf(m->F[33]) * modelgen_power_of_two(exponent[5] - exponent[3]) +
+                    fabsf(m->F[34]) * modelgen_power_of_two(exponent[13] - exponent[3]) +
+                    fabsf(m->F[35]) * modelgen_power_of_two(exponent[14] - exponent[3]) +
+                    fabsf(m->F[36]) * modelgen_power_of_two(exponent[15] - exponent[3]);
+            norm = v > norm ? v : norm;
+            v = fabsf(m->F[37]) * modelgen_power_of_two(exponent[0] - exponent[4]) + fabsf(m->F[38])
+                    * modelgen_power_of_two(exponent[2] - exponent[4]) + fabsf(m->F[39]) *
+                    modelgen_power_of_two(exponent[3] - exponent[4]) + fabsf(m->F[40]) +
+                    fabsf(m->F[41]) * modelgen_power_of_two(exponent[5] - exponent[4]) +
+                    fabsf(m->F[42]) * modelgen_power_of_two(exponent[13] - exponent[4]) +
+                    fabsf(m->F[43]) * modelgen_power_of_two(exponent[14] - exponent[4]) +
+                    fabsf(m->F[44]) * modelgen_power_of_two(exponent[15] - exponent[4]);
+            norm = v > norm ? v : norm;
+            v = fabsf(m->F[45]) * modelgen_power_of_two(exponent[3] - exponent[5]);
+            norm = v > norm ? v : norm;
+            v = fabsf(m->F[46]) * modelgen_power_of_two(exponent[4] - exponent[6]) + fabsf(m->F[47])
+                    * modelgen_power_of_two(exponent[5] - exponent[6]);
+            norm = v > norm ? v : norm;
+            v = fabsf(m->F[48]);
+            norm = v > norm ? v : norm;
+            v = fabsf(m->F[49]);
+            norm = v > norm ? v : norm;
+            v = fabsf(m->F[50]);
+            norm = v > norm ? v : norm;
+            v = fabsf(m->F[51]);
+            norm = v > norm ? v : norm;
+            v = fabsf(m->F[52]);
+            norm = v > norm ? v : norm;
+            v = fabsf(m->F[53]);
+            norm = v > norm ? v : norm;
+
+            if (taylor_plan(norm, T, &halvings, &order) == NED_DOPPLER18_OK && halvings == 0) {
+                return norm;
+            }
+        }
     }
+    norm = 0.0F;
     v = fabsf(m->F[0]) * modelgen_power_of_two(exponent[1] - exponent[0]) + fabsf(m->F[1]) *
             modelgen_power_of_two(exponent[2] - exponent[0]) + fabsf(m->F[2]) *
             modelgen_power_of_two(exponent[4] - exponent[0]) + fabsf(m->F[3]) *
@@ -708,6 +798,7 @@ NED_DOPPLER18_BLOCK ned_doppler18_scalar rebalanced_norm(const ned_doppler18_mat
     norm = v > norm ? v : norm;
     v = fabsf(m->F[53]);
     norm = v > norm ? v : norm;
+
     return norm;
 }
 
@@ -3776,19 +3867,13 @@ int ned_doppler18_discretize(const ned_doppler18_matrices *restrict m, ned_doppl
     if (!(T > 0.0F)) {
         return NED_DOPPLER18_ERR_NOT_POSITIVE;
     }
+    /* F's test is the sum of balanced_norm's rows (computed here, used only once F is known
+            finite) */
+    norm = balanced_norm(m, &sums[0]);
     /* every value finite: their sum, in four partial sums four values a step (which gcc -O2
        vectorizes as two pairs), is finite only if every value is; a sum that is not (a value that
                is
        not finite, or an overflow of finite values) is decided value by value */
-    for (e = 0; e + 3 < NED_DOPPLER18_NNZ_F; e += 4) {
-        sums[0] += m->F[e];
-        sums[1] += m->F[e + 1];
-        sums[2] += m->F[e + 2];
-        sums[3] += m->F[e + 3];
-    }
-    for (; e < NED_DOPPLER18_NNZ_F; ++e) {
-        sums[0] += m->F[e];
-    }
     for (e = 0; e + 3 < NED_DOPPLER18_NNZ_G; e += 4) {
         sums[0] += m->G[e];
         sums[1] += m->G[e + 1];
@@ -3838,13 +3923,12 @@ int ned_doppler18_discretize(const ned_doppler18_matrices *restrict m, ned_doppl
     /* Scaling and squaring (modelgen/derivation/discretization.py): the series over h = T / 2^s,
        of the order the plan chose, then s doublings Phi(2h) = Phi(h)^2 and
        S(2h) = (S(h) + Phi(h) S(h)) / 2, where h S(h) = int_0^h e^{F s} ds. */
-    norm = balanced_norm(m);
     status = taylor_plan(norm, T, &halvings, &order);
     if (status != NED_DOPPLER18_OK || halvings > 0) {
         /* a doubling at stake: the plan on F's own balancing at this operating point, from the
                 fixed D
            (modelgen.derivation.discretization.step_plan) */
-        const ned_doppler18_scalar rebalanced = rebalanced_norm(m, w);
+        const ned_doppler18_scalar rebalanced = rebalanced_norm(m, T, w);
         if (rebalanced < norm || status != NED_DOPPLER18_OK) {
             status = taylor_plan(rebalanced < norm ? rebalanced : norm, T, &halvings, &order);
         }
